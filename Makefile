@@ -1,0 +1,34 @@
+# pathrl — the two user-facing commands are `make reproduce-tables` and `make test`.
+SHELL := /bin/bash
+PYTHON ?= python3
+VENV := .venv
+PY := $(VENV)/bin/python
+STAMP := $(VENV)/.installed
+export OMP_NUM_THREADS ?= 1
+
+.PHONY: setup test lint bench reproduce-tables datasets clean
+
+setup: $(STAMP)
+
+$(STAMP): pyproject.toml
+	test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install -q --upgrade pip
+	# torch first, pinned: this resolves to the local CPU build (any other spec pulls a CUDA build).
+	$(PY) -m pip install -q torch==2.13.0
+	$(PY) -m pip install -q -e '.[dev]'
+	touch $(STAMP)
+
+test: setup
+	$(PY) -m pytest
+
+lint: setup
+	$(VENV)/bin/ruff check pathrl tests tools
+
+bench: setup
+	$(PY) tools/bench.py
+
+reproduce-tables: setup
+	$(PY) tools/reproduce_tables.py $(if $(PROFILE),--profile $(PROFILE)) $(if $(TRAIN),--train)
+
+clean:
+	rm -rf outputs multirun .pytest_cache

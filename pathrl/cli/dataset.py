@@ -1,0 +1,147 @@
+"""``pathrl-dataset``: generate, import and inspect reference-path datasets.
+
+    pathrl-dataset generate robot=iiwa7 dataset=random [dataset.num_train=N dataset.num_test=N
+                            dataset.seed=S dataset.path=DIR workers=2 overwrite=true]
+    pathrl-dataset import --format kiemel-json --robot ROBOT [--overwrite] SRC_DIR DEST
+    pathrl-dataset info DEST
+
+Bad input -> one line on stderr, exit code 2, nothing written.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+from pathrl.cli.common import UserError, compose, run_cli, to_container
+
+USAGE = __doc__.split("\n\n")[1]
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str) -> None:  # one line, exit code 2 via UserError
+        raise UserError(f"{self.prog}: {message}")
+
+
+def _fmt_stats(st: Mapping[str, Any]) -> str:
+    if not st or not st.get("count"):
+        return "0 paths"
+    k, length = st["knots"], st["length"]
+    return (
+        f"{st['count']} paths, knots {k['min']}/{k['mean']:.1f}/{k['max']}, "
+        f"length {length['min']:.2f}/{length['mean']:.2f}/{length['max']:.2f} rad, "
+        f"max knot gap {st['max_knot_gap']:.4f}"
+    )
+
+
+def print_info(meta: Mapping[str, Any], path: str, out=None) -> None:
+    out = out or sys.stdout
+    print(f"dataset   {path}", file=out)
+    print(f"format    {meta.get('format')}  source {meta.get('source')}  created {meta.get('created')}", file=out)
+    print(f"robot     {meta.get('robot')}  kind {meta.get('kind')}  seed {meta.get('seed')}  "
+          f"path joints {len(meta.get('path_joints', []))}", file=out)
+    print(f"hash      {meta.get('content_hash')}", file=out)
+    print("splits    " + ", ".join(f"{s} {n}" for s, n in meta.get("splits", {}).items()), file=out)
+    if meta.get("default_knots"):
+        print(f"knots     default strategy {json.dumps(meta['default_knots'])}", file=out)
+    if meta.get("reference_max_knot_gap") is not None:
+        print(f"reference max knot gap (spline_config) {meta['reference_max_knot_gap']}", file=out)
+    print("stats     (knots min/mean/max, length min/mean/max)", file=out)
+    for split, by_strategy in meta.get("stats", {}).items():
+        for strategy, st in by_strategy.items():
+            print(f"  {split:5s} {strategy:22s} {_fmt_stats(st)}", file=out)
+    gen = meta.get("generator") or {}
+    if gen:
+        shown = {k: v for k, v in gen.items() if k != "robot_config"}
+        print(f"generator {json.dumps(shown, sort_keys=True)}", file=out)
+    if meta.get("generation"):
+        print(f"generation {json.dumps(meta['generation'])}", file=out)
+
+
+def cmd_generate(overrides: Sequence[str]) -> None:
+    from pathrl.dataset.generate import GenerationError, generate_dataset
+    from pathrl.dataset.io import DatasetError
+    from pathrl.robot.model import RobotConfigError
+
+    bad = [o for o in overrides if "=" not in o]
+    if bad:
+        raise UserError(f"generate: expected key=value overrides, got {bad[0]!r}")
+    cfg = compose("dataset_app", overrides)
+    t0 = time.perf_counter()
+    try:
+        ds = generate_dataset(
+            to_container(cfg.robot),
+            to_container(cfg.dataset),
+            workers=int(cfg.workers),
+            overwrite=bool(cfg.overwrite),
+            progress=sys.stderr.isatty(),
+        )
+    except (DatasetError, RobotConfigError, GenerationError) as exc:
+        raise UserError(str(exc)) from None
+    print(f"wrote {ds.path} in {time.perf_counter() - t0:.1f} s")
+    print_info(ds.meta, str(ds.path))
+
+
+def cmd_import(argv: Sequence[str]) -> None:
+    from pathrl.dataset.io import DatasetError
+    from pathrl.dataset.kiemel import import_kiemel
+    from pathrl.robot.model import RobotConfigError, load_robot_by_name
+
+    ap = _Parser(prog="pathrl-dataset import", add_help=True)
+    ap.add_argument("--format", required=True, choices=["kiemel-json"])
+    ap.add_argument("--robot", required=True, help="conf/robot name, e.g. iiwa7")
+    ap.add_argument("--overwrite", action="store_true")
+    ap.add_argument("--kind", default=None, help="dataset kind to record (default: source dir name)")
+    ap.add_argument("src_dir")
+    ap.add_argument("dest")
+    args = ap.parse_args(list(argv))
+    t0 = time.perf_counter()
+    try:
+        robot = load_robot_by_name(args.robot)
+        ds = import_kiemel(args.src_dir, args.dest, robot, overwrite=args.overwrite, kind=args.kind)
+    except (DatasetError, RobotConfigError) as exc:
+        raise UserError(str(exc)) from None
+    print(f"imported {args.src_dir} -> {ds.path} in {time.perf_counter() - t0:.1f} s")
+    print_info(ds.meta, str(ds.path))
+
+
+def cmd_info(argv: Sequence[str]) -> None:
+    from pathrl.dataset.io import DatasetError, load_dataset
+
+    ap = _Parser(prog="pathrl-dataset info")
+    ap.add_argument("dest")
+    args = ap.parse_args(list(argv))
+    try:
+        ds = load_dataset(args.dest)
+    except DatasetError as exc:
+        raise UserError(str(exc)) from None
+    print_info(ds.meta, str(ds.path))
+
+
+def _main(argv: list[str]) -> None:
+    if not argv or argv[0] in ("-h", "--help"):
+        if argv:
+            print(USAGE)
+            return
+        raise UserError("missing command; usage: pathrl-dataset {generate,import,info} ...")
+    cmd, rest = argv[0], argv[1:]
+    if cmd == "generate":
+        cmd_generate(rest)
+    elif cmd == "import":
+        cmd_import(rest)
+    elif cmd == "info":
+        cmd_info(rest)
+    else:
+        raise UserError(f"unknown command {cmd!r}; choose one of generate, import, info")
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    return run_cli(_main, argv)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,94 @@
+"""``pathrl-eval``: evaluate a training run or a shipped model directory.
+
+    pathrl-eval run_dir=models/iiwa7_random [dataset=NAME | dataset.path=DIR] [split=test]
+                [episodes=N] [segments=paper|full] [seed=0] [out=DIR]
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from pathrl.cli.common import UserError, run_cli
+
+USAGE = ("usage: pathrl-eval run_dir=RUN [dataset=NAME | dataset.path=DIR] [split=test] [episodes=N] "
+         "[segments=paper|full] [seed=S] [out=DIR] [record=true|false]")
+KEYS = {"run_dir", "dataset", "dataset.path", "split", "episodes", "segments", "seed", "out", "record", "num_envs"}
+
+
+def parse_args(argv: list[str]) -> dict[str, str]:
+    args: dict[str, str] = {}
+    for a in argv:
+        if a in ("-h", "--help"):
+            print(USAGE)
+            raise SystemExit(0)
+        if "=" not in a:
+            raise UserError(f"expected key=value, got {a!r}; {USAGE}")
+        k, v = a.split("=", 1)
+        if k not in KEYS:
+            raise UserError(f"unknown argument {k!r}; known: {', '.join(sorted(KEYS))}")
+        args[k] = v
+    if "run_dir" not in args:
+        raise UserError(f"run_dir is required; {USAGE}")
+    return args
+
+
+def _int(args: dict[str, str], key: str, default: int | None) -> int | None:
+    if key not in args:
+        return default
+    try:
+        return int(args[key])
+    except ValueError:
+        raise UserError(f"{key} must be an integer, got {args[key]!r}") from None
+
+
+def _main(argv: list[str]) -> None:
+    from pathrl.dataset.io import DatasetError
+    from pathrl.eval.evaluate import RunError, evaluate, load_run
+
+    args = parse_args(argv)
+    segments = args.get("segments", "paper")
+    if segments not in ("paper", "full"):
+        raise UserError(f"segments must be paper or full, got {segments!r}")
+    episodes = _int(args, "episodes", None)
+    if episodes is not None and episodes < 1:
+        raise UserError(f"episodes must be >= 1, got {episodes}")
+    run_dir = Path(args["run_dir"])
+    dataset_path = args.get("dataset.path")
+    if "dataset" in args:
+        try:
+            cfg, _, _ = load_run(run_dir)
+        except RunError as exc:
+            raise UserError(str(exc)) from None
+        dataset_path = str(Path("data") / cfg["robot"]["name"] / args["dataset"])
+    try:
+        m = evaluate(run_dir, dataset_path, args.get("split", "test"), episodes, segments,
+                     _int(args, "seed", 0) or 0, Path(args["out"]) if "out" in args else None,
+                     num_envs=_int(args, "num_envs", 1200) or 1200,
+                     record=args.get("record", "true").lower() != "false")
+    except (RunError, DatasetError) as exc:
+        raise UserError(str(exc)) from None
+    _print_table(m)
+
+
+def _print_table(m: dict) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    t = Table(title=f"{m['robot']} on {m['dataset']} ({m['split']}, {m['segments']}, {m['episodes']} episodes)")
+    t.add_column("metric")
+    t.add_column("value", justify="right")
+    for k in ("duration_s", "joint_dev_mean_rad", "joint_dev_max_rad", "joint_dev_final_rad",
+              "cart_pos_dev_mean_cm", "cart_pos_dev_max_cm", "cart_pos_dev_final_cm",
+              "cart_rot_dev_mean_deg", "cart_rot_dev_max_deg", "cart_rot_dev_final_deg",
+              "terminated_early_pct", "limit_violations"):
+        v = m[k]
+        t.add_row(k, f"{v:.3f}" if isinstance(v, float) else str(v))
+    Console().print(t)
+
+
+def main(argv: list[str] | None = None) -> int:
+    return run_cli(_main, argv)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,129 @@
+"""Dataclass schemas of every config group. Hydra validates composed YAML against these.
+
+No logic here: the schema names the keys and their types; defaults live in ``conf/``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+from omegaconf import MISSING
+
+
+@dataclass
+class TcpCfg:
+    link: str = MISSING
+    offset: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
+
+
+@dataclass
+class WorkspaceCfg:
+    x: list[float] = MISSING
+    y: list[float] = MISSING
+    z: list[float] = MISSING
+
+
+@dataclass
+class RobotCfg:
+    name: str = MISSING
+    urdf: str = MISSING
+    fixed_base: bool = True
+    joints: list[str] = MISSING
+    path_joints: list[str] = MISSING
+    position_limits: list[list[float]] = MISSING
+    position_margin: float = 0.0
+    velocity_limits: list[float] = MISSING
+    acceleration_limits: list[float] = MISSING
+    jerk_limits: list[float] = MISSING
+    deviation_weights: list[float] = MISSING
+    tcps: list[TcpCfg] = MISSING
+    workspace: WorkspaceCfg = field(default_factory=WorkspaceCfg)
+    floor_z: float = 0.0
+
+
+@dataclass
+class DatasetCfg:
+    name: str = MISSING
+    kind: str = MISSING  # random | target_point | ball_balancing | imported
+    path: str = MISSING  # directory of the dataset on disk (relative paths: to the working directory)
+    num_train: int = 1000
+    num_test: int = 200
+    seed: int = 0
+    params: dict[str, Any] = field(default_factory=dict)  # generator-specific overrides
+
+
+@dataclass
+class KnotsCfg:
+    name: str = MISSING
+    strategy: str = "curvature"  # curvature | distance | file
+    spacing: float = 0.3
+    base_spacing: float = 0.1
+    n_state: int = 9
+
+
+@dataclass
+class DatasetAppCfg:
+    """``pathrl-dataset generate``."""
+
+    robot: RobotCfg = field(default_factory=RobotCfg)
+    dataset: DatasetCfg = field(default_factory=DatasetCfg)
+    workers: int = 2
+    overwrite: bool = False
+
+
+@dataclass
+class ToppraAppCfg:
+    """``pathrl-toppra``."""
+
+    robot: RobotCfg = field(default_factory=RobotCfg)
+    dataset: DatasetCfg = field(default_factory=DatasetCfg)
+    knots: KnotsCfg = field(default_factory=KnotsCfg)
+    split: str = "test"
+    segments: str = "full"  # full | paper
+    episodes: int | None = None  # default: number of paths (full) or 1200 (paper)
+    seed: int = 0
+    control_rate: float = 240.0
+    workers: int = 1
+    out: str | None = None
+
+
+@dataclass
+class RewardCfg:
+    name: str = MISSING
+    terms: dict[str, dict[str, float]] = field(default_factory=dict)  # {term: {weight, <params>}}
+
+
+@dataclass
+class EnvCfg:
+    num_envs: int = 4096
+    dt: float = 0.1
+    control_rate: float = 240.0
+    substeps: int = 8
+    episode_budget_s: float = 16.0
+    scale_budget: bool = True
+    segments: str = "paper"
+    start_range: list[float] = field(default_factory=lambda: [0.0, 0.8])
+    min_fraction: float = 0.2
+    max_deviation: float | None = None
+    stop_tolerance: float = 0.01
+    stop_bonus: bool = True
+
+
+@dataclass
+class TrainAppCfg:
+    """``pathrl-train``."""
+
+    robot: RobotCfg = field(default_factory=RobotCfg)
+    dataset: DatasetCfg = field(default_factory=DatasetCfg)
+    knots: KnotsCfg = field(default_factory=KnotsCfg)
+    reward: RewardCfg = field(default_factory=RewardCfg)
+    env: EnvCfg = field(default_factory=EnvCfg)
+    agent: dict[str, Any] = field(default_factory=dict)  # RSL-RL train cfg, keys verbatim
+    experiment: str = MISSING
+    seed: int = 0
+    device: str = "cpu"
+    threads: int = 1
+    iterations: int = 400
+    resume: bool = False
+    run_dir: str = MISSING

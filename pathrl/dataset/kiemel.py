@@ -1,0 +1,131 @@
+"""Import datasets in the format of the paper's original code (Kiemel et al., ``tracking/dataset``).
+
+Source layout (original_pathtracking.md 4.1, 9.1)::
+
+    SRC_DIR/spline_config.json          (or in SRC_DIR's parent) with max_dis_between_knots
+    SRC_DIR/train/episode_*.json        and SRC_DIR/test/episode_*.json,  or
+    SRC_DIR/episode_*.json              (then all files go to the ``test`` split)
+
+Each episode file holds ``_b_spline`` = {t, c, k} (scipy BSpline, c: (K+2) x M) and ``_u`` (the knots'
+chord-length parameters); the knot positions are ``BSpline(t, c, k)(_u)``. The knots are stored as
+they are (the authors' curvature / distance resampling was already applied), so load imported sets
+with the ``file`` knot strategy to reproduce the authors' knots exactly. The source file's stem is the
+path's name; files are processed in sorted order.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from scipy.interpolate import BSpline
+
+from pathrl.dataset.io import Dataset, DatasetError, check_destination, dataset_stats, save_dataset
+from pathrl.robot.model import RobotSpec
+
+SPLINE_CONFIG = "spline_config.json"
+
+
+def read_episode(path: Path, path_dof: int | None = None) -> np.ndarray:
+    """Knot positions (K, M) of one authors' episode file. Raises a one-line DatasetError."""
+    try:
+        data = json.loads(path.read_text())
+    except (OSError, ValueError) as exc:
+        raise DatasetError(f"{path}: invalid JSON ({exc})") from None
+    if not isinstance(data, dict):
+        raise DatasetError(f"{path}: expected a JSON object")
+    for key in ("_b_spline", "_u"):
+        if key not in data or data[key] is None:
+            raise DatasetError(f"{path}: missing key {key!r}")
+    bs = data["_b_spline"]
+    if not isinstance(bs, dict):
+        raise DatasetError(f"{path}: '_b_spline' must be an object with t, c, k")
+    for key in ("t", "c", "k"):
+        if key not in bs or bs[key] is None:
+            raise DatasetError(f"{path}: missing key '_b_spline.{key}'")
+    try:
+        t = np.asarray(bs["t"], dtype=np.float64)
+        c = np.asarray(bs["c"], dtype=np.float64)
+        u = np.asarray(data["_u"], dtype=np.float64)
+        k = int(bs["k"])
+    except (TypeError, ValueError) as exc:
+        raise DatasetError(f"{path}: non-numeric spline data ({exc})") from None
+    if t.ndim != 1 or u.ndim != 1 or c.ndim != 2:
+        raise DatasetError(f"{path}: expected 1-D '_b_spline.t' and '_u' and 2-D '_b_spline.c'")
+    if not (np.all(np.isfinite(t)) and np.all(np.isfinite(c)) and np.all(np.isfinite(u))):
+        raise DatasetError(f"{path}: NaN or inf in '_b_spline' or '_u'")
+    if path_dof is not None and c.shape[1] != path_dof:
+        raise DatasetError(f"{path}: spline has {c.shape[1]} joints, robot has {path_dof} path joints")
+    if len(u) < 2:
+        raise DatasetError(f"{path}: '_u' needs at least 2 knot parameters, got {len(u)}")
+    if np.any(np.diff(u) <= 0):
+        raise DatasetError(f"{path}: '_u' is not strictly increasing")
+    if k < 1 or len(t) != c.shape[0] + k + 1:
+        raise DatasetError(f"{path}: inconsistent B-spline: len(t)={len(t)}, len(c)={c.shape[0]}, k={k}")
+    if np.any(np.diff(t) < 0):
+        raise DatasetError(f"{path}: '_b_spline.t' is not non-decreasing")
+    if u[0] < t[k] - 1e-12 or u[-1] > t[-k - 1] + 1e-12:
+        raise DatasetError(f"{path}: '_u' outside the spline's domain [{t[k]}, {t[-k - 1]}]")
+    knots = BSpline(t, c, k)(u)
+    if not np.all(np.isfinite(knots)):
+        raise DatasetError(f"{path}: spline evaluates to NaN at '_u'")
+    if np.all(np.linalg.norm(np.diff(knots, axis=0), axis=1) <= 1e-9):
+        raise DatasetError(f"{path}: path has fewer than two distinct knots")
+    return knots
+
+
+def find_spline_config(src: Path) -> tuple[Path | None, dict[str, Any]]:
+    for d in (src, src.parent):
+        p = d / SPLINE_CONFIG
+        if p.is_file():
+            try:
+                cfg = json.loads(p.read_text())
+            except (OSError, ValueError) as exc:
+                raise DatasetError(f"{p}: invalid JSON ({exc})") from None
+            if not isinstance(cfg, dict):
+                raise DatasetError(f"{p}: expected a JSON object")
+            gap = cfg.get("max_dis_between_knots")
+            if gap is not None and not (isinstance(gap, (int, float)) and np.isfinite(gap) and gap > 0):
+                raise DatasetError(f"{p}: 'max_dis_between_knots' must be a positive number, got {gap!r}")
+            return p, cfg
+    return None, {}
+
+
+def import_kiemel(
+    src_dir: str | os.PathLike,
+    dest: str | os.PathLike,
+    robot: RobotSpec,
+    overwrite: bool = False,
+    kind: str | None = None,
+) -> Dataset:
+    """Convert an authors'-format dataset directory into a pathrl dataset at `dest` (atomic)."""
+    src = Path(src_dir)
+    if not src.is_dir():
+        raise DatasetError(f"{src}: source directory not found")
+    check_destination(dest, overwrite)
+    subdirs = [s for s in ("train", "test") if (src / s).is_dir()]
+    layout = {s: src / s for s in subdirs} if subdirs else {"test": src}
+    splits: dict[str, list[tuple[str, np.ndarray]]] = {"train": [], "test": []}
+    for split, d in layout.items():
+        files = sorted(d.glob("episode_*.json"))
+        splits[split] = [(f.stem, read_episode(f, robot.path_dof)) for f in files]
+    if not any(splits.values()):
+        raise DatasetError(f"{src}: no episode_*.json files found (looked in {', '.join(map(str, layout.values()))})")
+    cfg_path, cfg = find_spline_config(src)
+    stats = {s: {"stored": dataset_stats([k for _, k in p])} for s, p in splits.items()}
+    meta = {
+        "robot": robot.name,
+        "kind": kind or src.name,
+        "path_joints": list(robot.path_joints),
+        "seed": None,
+        "generator": {"format": "kiemel-json", "src_dir": str(src.resolve())},
+        "source": "kiemel-json",
+        "default_knots": {"strategy": "file"},
+        "reference_max_knot_gap": cfg.get("max_dis_between_knots"),
+        "spline_config": cfg,
+        "spline_config_path": str(cfg_path) if cfg_path else None,
+    }
+    return save_dataset(dest, splits, meta, overwrite=overwrite, stats=stats)

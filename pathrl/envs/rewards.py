@@ -1,0 +1,109 @@
+"""Reward terms of the path-tracking MDP: pure functions of one step's quantities.
+
+Every term maps a :class:`StepQuantities` (all (N,) tensors) and its own parameters to a (N,)
+tensor in [0, 1]; the env weights and sums them (weights in ``conf/reward/*.yaml``). All terms are
+non-negative (as in the paper), so ending an episode early never pays off.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import torch
+from torch import Tensor
+
+
+@dataclass(frozen=True)
+class StepQuantities:
+    """What one decision step did, per env (all (N,)).
+
+    moved: joint-space arc length commanded during the step, L_a (rad).
+    l_state: path length still covered by the observation the action was chosen from,
+        l_State = s(last knot in the window) - s(before the step) (rad); 0 at the path end.
+    horizon: K * D, the longest path length a window can cover (rad).
+    dev_max, dev_mean: weighted joint-space deviation from the reference over the step (rad).
+    action_absmax: max_j |action_j| (raw action, before clipping).
+    close_to_end: the window already reaches the path's end knot.
+    """
+
+    moved: Tensor
+    l_state: Tensor
+    horizon: Tensor
+    dev_max: Tensor
+    dev_mean: Tensor
+    action_absmax: Tensor
+    close_to_end: Tensor
+
+
+def path_length(q: StepQuantities, overshoot_factor: float = 1.0) -> Tensor:
+    """Paper's R_l: 1 when the step moves exactly l_State, quadratically less for shorter or longer moves.
+
+    Shorter: 1 - (L_a / l_State - 1)^2 (0 at standstill). Longer: (min(1, (L_a - l_State) /
+    (f K D)) - 1)^2 (0 once the overshoot reaches f K D). At the path end l_State = 0, so standing
+    still earns 1.
+    """
+    short = q.moved < q.l_state
+    rho_short = q.moved / q.l_state.clamp(min=1e-12)
+    r_short = 1.0 - (rho_short - 1.0) ** 2
+    rho_long = ((q.moved - q.l_state) / (overshoot_factor * q.horizon)).clamp(max=1.0)
+    r_long = (rho_long - 1.0) ** 2
+    return torch.where(short, r_short, r_long)
+
+
+def _closeness(dev: Tensor, threshold: float) -> Tensor:
+    return (1.0 - (dev / threshold).clamp(max=1.0)) ** 2
+
+
+def deviation_max(q: StepQuantities, threshold: float = 0.25) -> Tensor:
+    """Paper's R_d (max part): (1 - min(1, max deviation / threshold))^2."""
+    return _closeness(q.dev_max, threshold)
+
+
+def deviation_mean(q: StepQuantities, threshold: float = 0.25) -> Tensor:
+    """Paper's R_d (mean part): (1 - min(1, mean deviation / threshold))^2."""
+    return _closeness(q.dev_mean, threshold)
+
+
+def action_saturation(q: StepQuantities, threshold: float = 0.9) -> Tensor:
+    """Authors' iiwa action reward: rewards using the limits fully (max |action| near 1), 1 near the end.
+
+    0 below `threshold`, rising quadratically to 1 at |action| = 1 (and above).
+    """
+    m = q.action_absmax.clamp(max=1.0)
+    r = (1.0 - ((m - 1.0) / (threshold - 1.0)) ** 2).clamp(min=0.0)
+    r = torch.where(m > threshold, r, torch.zeros_like(r))
+    return torch.where(q.close_to_end, torch.ones_like(r), r)
+
+
+RewardFn = Callable[..., Tensor]
+
+REWARD_TERMS: dict[str, RewardFn] = {
+    "path_length": path_length,
+    "deviation_max": deviation_max,
+    "deviation_mean": deviation_mean,
+    "action_saturation": action_saturation,
+}
+
+
+@dataclass(frozen=True)
+class RewardTerm:
+    name: str
+    weight: float
+    fn: RewardFn
+    params: Mapping[str, Any]
+
+    def __call__(self, q: StepQuantities) -> Tensor:
+        return self.fn(q, **self.params)
+
+
+def build_reward_terms(terms_cfg: Mapping[str, Mapping[str, Any]]) -> list[RewardTerm]:
+    """Terms from ``{name: {weight: w, <param>: value, ...}}``; unknown names are an error."""
+    out = []
+    for name, spec in terms_cfg.items():
+        if name not in REWARD_TERMS:
+            raise ValueError(f"unknown reward term {name!r}; known: {sorted(REWARD_TERMS)}")
+        params = {k: v for k, v in dict(spec).items() if k != "weight"}
+        out.append(RewardTerm(name, float(spec.get("weight", 1.0)), REWARD_TERMS[name], params))
+    return out

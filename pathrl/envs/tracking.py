@@ -1,0 +1,325 @@
+"""Batched path-tracking environment (pure kinematics, torch), implementing rsl-rl's ``VecEnv``.
+
+MDP (paper, Sec. III; original_pathtracking.md 3-7):
+  state   commanded joint position / velocity / acceleration (normalized), the knot window
+          (N knots: the knot at/behind the robot and N-1 ahead), the position inside the current knot
+          interval, the path length covered by the window, the distance of each window knot.
+  action  one value in [-1, 1] per joint, mapped into the valid acceleration range for the end of the
+          next 0.1 s step (jerk/acceleration/velocity/position limits, braking stays possible).
+  reward  sum of weighted terms (pathrl.envs.rewards): path length R_l and deviation R_d (+ task terms).
+
+Fixed step order (per env, batched; every tensor is (N, ...)):
+  1. clip actions; a1 = a_min + (1 + action) / 2 (a_max - a_min); envs in braking mode use the braking law.
+  2. integrate with linearly interpolated acceleration: `substeps` intermediate positions + end state.
+  3. progress: arc length L_a of the polyline through the step's positions (path joints).
+  4. deviation: each intermediate position vs the reference at the same arc length from the step start.
+  5. reward terms from (L_a, l_State, deviations, action); path position s += L_a (clipped at the end).
+  6. reaching the end switches to braking from the next step; "stopped" (|v|, |a| < tol after braking)
+     terminates; the step budget truncates (time out); optional deviation threshold terminates.
+  7. terminating by a stop multiplies that step's reward by the remaining budget (paper: finishing
+     early is never worse than idling to the time limit).
+  8. finished envs are reset (new path segment); observations are built for all envs.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+
+import torch
+from tensordict import TensorDict
+from torch import Tensor
+
+from pathrl.envs.rewards import RewardTerm, StepQuantities
+from pathrl.limits.braking import braking_acceleration, is_stopped
+from pathrl.limits.feasible import JointLimits, action_to_acceleration, valid_acceleration_range
+from pathrl.limits.integrate import end_of_step, interpolate_step
+from pathrl.paths.pathset import PathSet
+from pathrl.paths.segments import Segments, full_segments, sample_segments
+from pathrl.robot.model import RobotSpec
+
+try:  # rsl-rl is a training dependency; the env works without it (evaluation, tests).
+    from rsl_rl.env import VecEnv as _VecEnvBase
+except ImportError:  # pragma: no cover
+    _VecEnvBase = object
+
+
+@dataclass(frozen=True)
+class TrackingEnvCfg:
+    """Environment settings (``conf/env/*.yaml``)."""
+
+    num_envs: int = 4096
+    device: str = "cpu"
+    seed: int = 0
+    dt: float = 0.1  # decision step (s)
+    control_rate: float = 240.0  # setpoints per second (24 per step), used by backends and evaluation
+    substeps: int = 8  # intermediate positions per step for progress and deviation
+    episode_budget_s: float = 16.0  # time budget for a whole path (s)
+    scale_budget: bool = True  # scale the budget by the fraction of the path in the segment
+    segments: str = "paper"  # training segments: paper | full
+    start_range: tuple[float, float] = (0.0, 0.8)
+    min_fraction: float = 0.2
+    max_deviation: float | None = None  # terminate if a step's max deviation exceeds this (rad)
+    stop_tolerance: float = 0.01  # |v| and |a| below this count as stopped
+    stop_bonus: bool = True
+    knot_gap_norm: float | None = None  # D (rad); default: the path set's largest knot gap
+    n_state: int = 9  # knots in the observation
+    autoreset: bool = True
+
+
+TERMINATION_REASONS = ("robot_stopped", "deviation", "time_out")
+
+
+class PathTrackingEnv(_VecEnvBase):
+    """N robots tracking reference path segments in parallel."""
+
+    def __init__(
+        self,
+        cfg: TrackingEnvCfg,
+        robot: RobotSpec,
+        paths: PathSet,
+        reward_terms: list[RewardTerm],
+    ) -> None:
+        self.cfg = cfg
+        self.robot = robot
+        self.device = torch.device(cfg.device)
+        self.num_envs = n = cfg.num_envs
+        self.num_actions = robot.dof
+        self.generator = torch.Generator(device=self.device)
+        self.generator.manual_seed(cfg.seed)
+        self.limits = JointLimits.from_robot(robot, device=self.device)
+        self.reward_terms = reward_terms
+        self.paths = paths.to(self.device)
+        if self.paths.dof != robot.path_dof:
+            raise ValueError(f"paths have {self.paths.dof} joints, robot {robot.name} has {robot.path_dof} path joints")
+        self.path_index = torch.as_tensor(robot.path_index, device=self.device)
+        self.knot_gap = float(cfg.knot_gap_norm or self.paths.max_knot_gap())
+        self.horizon = (cfg.n_state - 1) * self.knot_gap
+        w = torch.as_tensor(robot.deviation_weights, dtype=torch.float64, device=self.device)
+        self.dev_weights = w * math.sqrt(len(w) / float((w**2).sum()))
+        self.max_episode_length = int(math.ceil(cfg.episode_budget_s / cfg.dt)) + 1
+
+        f64 = dict(dtype=torch.float64, device=self.device)
+        d = robot.dof
+        self.pos = torch.zeros(n, d, **f64)
+        self.vel = torch.zeros(n, d, **f64)
+        self.acc = torch.zeros(n, d, **f64)
+        self.a_min = torch.zeros(n, d, **f64)
+        self.a_max = torch.zeros(n, d, **f64)
+        self.seg_path = torch.zeros(n, dtype=torch.long, device=self.device)
+        self.s = torch.zeros(n, **f64)
+        self.start_s = torch.zeros(n, **f64)
+        self.end_s = torch.zeros(n, **f64)
+        self.end_knot = torch.zeros(n, dtype=torch.long, device=self.device)
+        self.l_obs = torch.zeros(n, **f64)  # arc length of the last knot in the current window
+        self.close_to_end = torch.zeros(n, dtype=torch.bool, device=self.device)
+        self.braking = torch.zeros(n, dtype=torch.bool, device=self.device)
+        self.budget = torch.full((n,), self.max_episode_length, dtype=torch.long, device=self.device)
+        self.episode_length_buf = torch.zeros(n, dtype=torch.long, device=self.device)
+        self.finish_step = torch.full((n,), -1, dtype=torch.long, device=self.device)
+        self.ep_reward = {t.name: torch.zeros(n, **f64) for t in reward_terms}
+        self.ep_dev_sum = torch.zeros(n, **f64)
+        self.ep_dev_max = torch.zeros(n, **f64)
+        self._obs = None
+        self.last_step: dict[str, Tensor] = {}
+        self.reset()
+
+    # ------------------------------------------------------------------ episode management
+    def reset(self) -> TensorDict:
+        """Reset every env to a fresh training segment."""
+        self._reset_envs(torch.arange(self.num_envs, device=self.device))
+        return self.get_observations()
+
+    def start_segments(self, env_ids: Tensor, seg: Segments, refresh: bool = True) -> None:
+        """Start envs `env_ids` on the given segments (robot at rest at the segment start).
+
+        `refresh=False` defers rebuilding observations (the step rebuilds them once for all envs).
+        """
+        self.seg_path[env_ids] = seg.path
+        self.start_s[env_ids] = seg.start_s
+        self.s[env_ids] = seg.start_s
+        self.end_s[env_ids] = seg.end_s
+        self.end_knot[env_ids] = seg.end_knot
+        q0 = self.paths.position_at(seg.path, seg.start_s)
+        pos = torch.zeros(len(env_ids), self.robot.dof, dtype=torch.float64, device=self.device)
+        pos[:, self.path_index] = q0
+        self.pos[env_ids] = pos
+        self.vel[env_ids] = 0.0
+        self.acc[env_ids] = 0.0
+        self.braking[env_ids] = False
+        self.episode_length_buf[env_ids] = 0
+        self.finish_step[env_ids] = -1
+        for v in self.ep_reward.values():
+            v[env_ids] = 0.0
+        self.ep_dev_sum[env_ids] = 0.0
+        self.ep_dev_max[env_ids] = 0.0
+        frac = (seg.end_s - seg.start_s) / self.paths.length[seg.path]
+        budget_s = self.cfg.episode_budget_s * (frac if self.cfg.scale_budget else torch.ones_like(frac))
+        self.budget[env_ids] = torch.round(budget_s / self.cfg.dt).long().clamp(min=1)
+        if refresh:
+            self._update_window()
+
+    def _reset_envs(self, env_ids: Tensor, refresh: bool = True) -> None:
+        if len(env_ids) == 0:
+            return
+        idx = torch.randint(self.paths.num_paths, (len(env_ids),), generator=self.generator, device=self.device)
+        if self.cfg.segments == "full":
+            seg = full_segments(self.paths, idx)
+        else:
+            seg = sample_segments(self.paths, idx, self.generator, self.cfg.start_range, self.cfg.min_fraction)
+        self.start_segments(env_ids, seg, refresh)
+
+    def replace_path(self, env_ids: Tensor, path: Tensor, s: Tensor, end_knot: Tensor | None = None) -> None:
+        """Online path adjustment: envs `env_ids` keep their robot state and now track `path` from arc length `s`.
+
+        The end is the path's last knot unless `end_knot` is given. The new path should pass near the
+        robot's current position (the deviation is measured against it from the next step on).
+        """
+        self.seg_path[env_ids] = path
+        self.s[env_ids] = s
+        self.start_s[env_ids] = s
+        ek = self.paths.num_knots[path] - 1 if end_knot is None else end_knot
+        self.end_knot[env_ids] = ek
+        self.end_s[env_ids] = self.paths.knot_s[path, ek]
+        self.braking[env_ids] = False
+        self._update_window()
+
+    def set_paths(self, paths: PathSet) -> None:
+        """Swap the path bank (e.g. an evaluation split). Envs keep running until they are reset."""
+        if paths.dof != self.robot.path_dof:
+            raise ValueError(f"paths have {paths.dof} joints, robot has {self.robot.path_dof} path joints")
+        self.paths = paths.to(self.device)
+
+    # ------------------------------------------------------------------ observation
+    def _update_window(self) -> None:
+        """Recompute the valid acceleration range, the knot window and the observation of all envs."""
+        a_min, a_max = valid_acceleration_range(self.pos, self.vel, self.acc, self.limits, self.cfg.dt)
+        self.a_min, self.a_max = a_min, a_max
+        self._obs = self._observe()
+
+    def _observe(self) -> Tensor:
+        lim = self.limits
+        lo, hi = lim.pos[:, 0], lim.pos[:, 1]
+        pos_n = 2.0 * (self.pos - lo) / (hi - lo) - 1.0
+        vel_n = self.vel / lim.vel
+        acc_n = self.acc / lim.acc
+        knots, ks = self.paths.window(self.seg_path, self.s, self.end_knot, self.cfg.n_state)
+        plo, phi = lo[self.path_index], hi[self.path_index]
+        knots_n = (2.0 * (knots - plo) / (phi - plo) - 1.0).flatten(1)
+        d0 = ks[:, :1]
+        self.l_obs = ks[:, -1]
+        self.close_to_end = ks[:, -1] >= self.end_s
+        inside = 2.0 * (self.s.unsqueeze(1) - d0) / self.knot_gap - 1.0
+        ahead = 2.0 * (ks - d0) / self.horizon - 1.0  # [:, -1] is the window length
+        obs = torch.cat([pos_n, vel_n, acc_n, knots_n, inside, ahead[:, -1:], ahead[:, 1:]], dim=1)
+        return obs.clamp(-1.0, 1.0).to(torch.float32)
+
+    @property
+    def num_obs(self) -> int:
+        return int(self._obs.shape[1])
+
+    def get_observations(self) -> TensorDict:
+        return TensorDict({"policy": self._obs}, batch_size=[self.num_envs], device=self.device)
+
+    # ------------------------------------------------------------------ step
+    def step(self, actions: Tensor) -> tuple[TensorDict, Tensor, Tensor, dict]:
+        cfg = self.cfg
+        actions = actions.to(device=self.device, dtype=torch.float64)
+        action_absmax = actions.abs().amax(dim=1)
+        a1 = action_to_acceleration(actions.clamp(-1.0, 1.0), self.a_min, self.a_max)
+        if bool(self.braking.any()):
+            brake = braking_acceleration(self.pos, self.vel, self.acc, self.limits, cfg.dt)
+            a1 = torch.where(self.braking.unsqueeze(1), brake, a1)
+
+        # 2. integrate: intermediate positions (path joints) and the end state
+        q_sub, _, _ = interpolate_step(self.pos, self.vel, self.acc, a1, cfg.dt, cfg.substeps)
+        q_sub = q_sub[:, :, self.path_index]  # (N, S, M)
+        p1, v1 = end_of_step(self.pos, self.vel, self.acc, a1, cfg.dt)
+        q_prev = torch.cat([self.pos[:, self.path_index].unsqueeze(1), q_sub[:, :-1]], dim=1)
+
+        # 3. progress along the path: polyline arc length of the commanded motion
+        seg_len = (q_sub - q_prev).norm(dim=2)  # (N, S)
+        cum = seg_len.cumsum(dim=1)
+        moved = cum[:, -1]
+
+        # 4. deviation at equal arc length from the step start (reference clamped at the segment end)
+        s_ref = torch.minimum(self.s.unsqueeze(1) + cum, self.end_s.unsqueeze(1))
+        ref = self.paths.position_at(self.seg_path, s_ref)
+        dev = ((ref - q_sub) * self.dev_weights).norm(dim=2)  # (N, S)
+        dev_max = dev.amax(dim=1)
+        moving = moved > 1e-12
+        dev_mean = torch.where(moving, (dev * seg_len).sum(1) / moved.clamp(min=1e-12), dev.mean(dim=1))
+
+        # 5. reward
+        q = StepQuantities(
+            moved=moved,
+            l_state=(self.l_obs - self.s).clamp(min=0.0),
+            horizon=torch.full_like(moved, self.horizon),
+            dev_max=dev_max,
+            dev_mean=dev_mean,
+            action_absmax=action_absmax,
+            close_to_end=self.close_to_end,
+        )
+        reward = torch.zeros_like(moved)
+        for term in self.reward_terms:
+            r = term.weight * term(q)
+            self.ep_reward[term.name] += r
+            reward += r
+
+        # state update
+        self.pos, self.vel, self.acc = p1, v1, a1
+        self.s = torch.minimum(self.s + moved, self.end_s)
+        self.episode_length_buf += 1
+        self.ep_dev_sum += dev_mean
+        self.ep_dev_max = torch.maximum(self.ep_dev_max, dev_max)
+
+        # 6. end of path -> braking; stop / deviation -> terminate; budget -> time out
+        reached = self.s >= self.end_s - 1e-9
+        newly = reached & (self.finish_step < 0)
+        self.finish_step = torch.where(newly, self.episode_length_buf, self.finish_step)
+        stopped = self.braking & is_stopped(self.vel, self.acc, cfg.stop_tolerance)
+        self.braking = self.braking | reached
+        terminated = stopped
+        dev_term = torch.zeros_like(stopped)
+        if cfg.max_deviation is not None:
+            dev_term = dev_max > cfg.max_deviation
+            terminated = terminated | dev_term
+        time_outs = (self.episode_length_buf >= self.budget) & ~terminated
+
+        # 7. finishing early is worth the rest of the budget
+        if cfg.stop_bonus:
+            remaining = (self.budget - self.episode_length_buf).clamp(min=0).to(reward.dtype)
+            reward = torch.where(stopped, reward * (1.0 + remaining), reward)
+
+        dones = terminated | time_outs
+        self.last_step = {
+            "moved": moved, "dev_max": dev_max, "dev_mean": dev_mean, "stopped": stopped,
+            "dev_terminated": dev_term, "time_outs": time_outs, "reached": reached,
+        }
+        extras = {"time_outs": time_outs, "log": self._episode_log(dones, stopped, dev_term, time_outs)}
+        if cfg.autoreset:
+            self._reset_envs(dones.nonzero().squeeze(1), refresh=False)
+        self._update_window()
+        return self.get_observations(), reward.to(torch.float32), dones, extras
+
+    def _episode_log(self, dones: Tensor, stopped: Tensor, dev_term: Tensor, time_outs: Tensor) -> dict:
+        """Per-term episode rewards and termination shares over the episodes that ended in this step."""
+        n_done = int(dones.sum())
+        if n_done == 0:
+            return {}
+        log: dict[str, float | Tensor] = {}
+        for name, v in self.ep_reward.items():
+            log[f"Episode_Reward/{name}"] = v[dones].mean()
+        steps = self.episode_length_buf[dones].to(torch.float64)
+        log["Episode_Termination/robot_stopped"] = stopped[dones].float().mean()
+        log["Episode_Termination/deviation"] = dev_term[dones].float().mean()
+        log["Episode_Termination/time_out"] = time_outs[dones].float().mean()
+        log["Metrics/duration_s"] = (steps * self.cfg.dt)[stopped[dones]].mean() if bool(stopped.any()) else 0.0
+        log["Metrics/dev_mean_rad"] = (self.ep_dev_sum[dones] / steps).mean()
+        log["Metrics/dev_max_rad"] = self.ep_dev_max[dones].mean()
+        return log
+
+    def describe(self) -> dict:
+        """JSON-able summary of the env (saved with runs)."""
+        return {"cfg": asdict(self.cfg), "robot": self.robot.name, "num_obs": self.num_obs,
+                "num_actions": self.num_actions, "knot_gap_norm": self.knot_gap}

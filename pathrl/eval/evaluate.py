@@ -1,0 +1,207 @@
+"""Evaluate a trained run (or a shipped model directory): metrics.json + episodes.mcap."""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+import yaml
+
+from pathrl.dataset.io import load_pathset
+from pathrl.envs.rewards import build_reward_terms
+from pathrl.envs.tracking import PathTrackingEnv
+from pathrl.eval.metrics import METRIC_KEYS, episode_deviation
+from pathrl.eval.rollout import EpisodeRecord, rollout
+from pathrl.limits.check import limit_violations
+from pathrl.limits.feasible import JointLimits
+from pathrl.logging.mcap_io import McapJsonWriter
+from pathrl.paths.knots import KnotStrategy
+from pathrl.paths.segments import evaluation_plan
+from pathrl.robot.kinematics import ForwardKinematics
+from pathrl.robot.model import RobotSpec, load_robot
+from pathrl.train.runner import PathRLRunner, env_cfg_from, latest_checkpoint, rsl_train_cfg
+
+
+class RunError(ValueError):
+    """A run / model directory is incomplete or unreadable."""
+
+
+def load_run(run_dir: Path) -> tuple[dict[str, Any], Path, dict[str, Any]]:
+    """(resolved config, checkpoint path, training summary) of a run or model directory."""
+    run_dir = Path(run_dir)
+    if not run_dir.is_dir():
+        raise RunError(f"run_dir not found: {run_dir}")
+    cfg_path = run_dir / "config.yaml"
+    if not cfg_path.is_file():
+        raise RunError(f"{cfg_path} missing: not a pathrl run or model directory")
+    try:
+        cfg = yaml.safe_load(cfg_path.read_text())
+    except yaml.YAMLError as exc:
+        raise RunError(f"{cfg_path}: invalid YAML ({str(exc).splitlines()[0]})") from None
+    ckpt = run_dir / "model.pt"
+    if not ckpt.is_file():
+        ckpt = latest_checkpoint(run_dir)
+    if ckpt is None:
+        raise RunError(f"{run_dir}: no checkpoint (model.pt or model_<iteration>.pt)")
+    summary = {}
+    if (run_dir / "summary.json").is_file():
+        summary = json.loads((run_dir / "summary.json").read_text())
+    return cfg, ckpt, summary
+
+
+def load_policy(cfg: dict[str, Any], env: PathTrackingEnv, ckpt: Path):
+    """The deterministic actor of checkpoint `ckpt` (weights only)."""
+    train_cfg = rsl_train_cfg(cfg, Path("."))
+    runner = PathRLRunner(env, train_cfg, log_dir=None, device=str(env.device))
+    try:
+        runner.load(str(ckpt), load_cfg={"actor": True}, map_location=str(env.device))
+    except (RuntimeError, KeyError, EOFError, OSError) as exc:
+        raise RunError(f"{ckpt}: unreadable checkpoint ({str(exc).splitlines()[0]})") from None
+    return runner.get_inference_policy(device=str(env.device))
+
+
+def evaluate(
+    run_dir: Path,
+    dataset_path: str | None = None,
+    split: str = "test",
+    episodes: int | None = None,
+    segments: str = "paper",
+    seed: int = 0,
+    out_dir: Path | None = None,
+    num_envs: int = 1200,
+    record: bool = True,
+    progress: bool = True,
+) -> dict[str, Any]:
+    """Evaluate the policy of `run_dir` deterministically; write metrics.json (+ episodes.mcap)."""
+    torch.set_num_threads(int(os.environ.get("PATHRL_THREADS", "1")))
+    cfg, ckpt, summary = load_run(run_dir)
+    robot = load_robot(cfg["robot"])
+    knots = KnotStrategy.from_cfg(cfg["knots"])
+    ds_path = dataset_path or cfg["dataset"]["path"]
+    paths = load_pathset(ds_path, split, knots, robot=robot)
+    if episodes is None:
+        episodes = paths.num_paths if segments == "full" else 1200
+    plan = evaluation_plan(paths, episodes, segments, seed)
+    gap = summary.get("knot_gap_norm") or cfg.get("knot_gap_norm")
+    env_cfg = replace(env_cfg_from(cfg, num_envs=min(num_envs, episodes), seed=seed, knot_gap_norm=gap),
+                      autoreset=False, device="cpu")
+    env = PathTrackingEnv(env_cfg, robot, paths, build_reward_terms(cfg["reward"]["terms"]))
+    policy = load_policy(cfg, env, ckpt)
+
+    t0 = time.perf_counter()
+    bar = _progress(episodes) if progress else None
+    records = rollout(env, policy, plan, progress=(lambda k: bar[0].update(bar[1], advance=k)) if bar else None)
+    if bar:
+        bar[0].stop()
+    rollout_s = time.perf_counter() - t0
+    fk = ForwardKinematics(robot)
+    limits = JointLimits.from_robot(robot)
+    per_episode = [_episode_metrics(r, env, fk, limits, robot, paths) for r in records]
+    metrics = _aggregate(per_episode, robot, ds_path, split, segments, seed)
+    metrics["eval_wall_time_s"] = time.perf_counter() - t0
+    metrics["rollout_wall_time_s"] = rollout_s
+    metrics["run_dir"] = str(run_dir)
+    metrics["checkpoint"] = ckpt.name
+    out = Path(out_dir) if out_dir else Path(run_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    if record:
+        write_episodes_mcap(out / "episodes.mcap", robot, paths, records, per_episode, fk)
+    tmp = out / "metrics.json.tmp"
+    tmp.write_text(json.dumps(metrics, indent=2))
+    os.replace(tmp, out / "metrics.json")
+    return metrics
+
+
+def _progress(total: int):
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
+
+    p = Progress("[bold]evaluate", BarColumn(), MofNCompleteColumn(), TimeRemainingColumn())
+    task = p.add_task("episodes", total=total)
+    p.start()
+    return p, task
+
+
+def _episode_metrics(r: EpisodeRecord, env: PathTrackingEnv, fk: ForwardKinematics, limits: JointLimits,
+                     robot: RobotSpec, paths) -> dict[str, Any]:
+    dev = episode_deviation(r.setpoints, torch.as_tensor(robot.path_index), paths, r.path, r.start_s, r.end_s, fk)
+    viol = limit_violations(r.setpoints, r.setpoint_vel, r.setpoint_acc, limits, r.extra["control_dt"])
+    return {
+        "episode": r.episode,
+        "path": paths.names[r.path],
+        "start_s": r.start_s,
+        "end_s": r.end_s,
+        "duration_s": r.duration_s,
+        "duration_end_of_path_s": r.finish_step * r.extra["dt"] if r.finish_step >= 0 else None,
+        "termination": r.termination,
+        "terminated_early": r.termination != "robot_stopped",
+        **dev,
+        "limit_violations": int(viol["total"]),
+    }
+
+
+def _aggregate(per: list[dict[str, Any]], robot: RobotSpec, dataset: str, split: str, segments: str,
+               seed: int) -> dict[str, Any]:
+    def mean(key: str) -> float:
+        return float(np.mean([p[key] for p in per]))
+
+    out: dict[str, Any] = {"robot": robot.name, "dataset": str(dataset), "split": split, "segments": segments,
+                           "seed": seed, "episodes": len(per), "duration_s": mean("duration_s")}
+    for k in METRIC_KEYS:
+        out[k] = mean(k)
+    out["terminated_early_pct"] = 100.0 * mean("terminated_early")
+    out["limit_violations"] = int(sum(p["limit_violations"] for p in per))
+    out["per_episode"] = per
+    return out
+
+
+ROBOT_SCHEMA = {"type": "object", "properties": {"robot": {"type": "string"}, "joint_names": {"type": "array"},
+                "position_limits": {"type": "array"}, "velocity_limits": {"type": "array"},
+                "acceleration_limits": {"type": "array"}, "jerk_limits": {"type": "array"},
+                "urdf": {"type": "string"}}}
+JOINT_STATE_SCHEMA = {"type": "object", "properties": {"episode": {"type": "integer"}, "t": {"type": "number"},
+                      "position": {"type": "array"}, "velocity": {"type": "array"},
+                      "acceleration": {"type": "array"}}}
+
+
+def write_episodes_mcap(path: Path, robot: RobotSpec, paths, records: list[EpisodeRecord],
+                        per_episode: list[dict[str, Any]], fk: ForwardKinematics) -> None:
+    """Evaluation episodes as MCAP (JSON): robot once, per episode reference + states + TCP + metrics."""
+    tmp = path.with_suffix(".mcap.tmp")
+    w = McapJsonWriter(tmp)
+    w.channel("/eval/robot", "pathrl.RobotDescription", ROBOT_SCHEMA)
+    w.channel("/eval/joint_state", "pathrl.JointState", JOINT_STATE_SCHEMA)
+    w.write("/eval/robot", {
+        "robot": robot.name, "joint_names": list(robot.joints), "path_joints": list(robot.path_joints),
+        "position_limits": robot.pos_limits.tolist(),
+        "velocity_limits": [[-v, v] for v in robot.vel_limits.tolist()],
+        "acceleration_limits": [[-v, v] for v in robot.acc_limits.tolist()],
+        "jerk_limits": [[-v, v] for v in robot.jerk_limits.tolist()],
+        "urdf": str(robot.urdf), "tcp_links": [t.link for t in robot.tcps],
+    }, 0)
+    t_ns = 0
+    for r, m in zip(records, per_episode, strict=True):
+        s = torch.linspace(r.start_s, r.end_s, 200, dtype=torch.float64)
+        q_ref = paths.position_at(torch.full((200,), r.path, dtype=torch.long), s)
+        full = r.pos[-1].expand(200, -1).clone()
+        full[:, torch.as_tensor(robot.path_index)] = q_ref
+        tcp_ref, _ = fk.tcp_poses(full)
+        w.write("/eval/reference", {"episode": r.episode, "path": paths.names[r.path], "s": s,
+                                    "position": q_ref, "tcp_position": tcp_ref}, t_ns)
+        tcp_p, tcp_q = fk.tcp_poses(r.pos)
+        for k in range(r.pos.shape[0]):
+            tk = t_ns + int(round(k * r.extra["dt"] * 1e9))
+            w.write("/eval/joint_state", {"episode": r.episode, "t": k * r.extra["dt"], "position": r.pos[k],
+                                          "velocity": r.vel[k], "acceleration": r.acc[k]}, tk)
+            w.write("/eval/tcp", {"episode": r.episode, "t": k * r.extra["dt"], "position": tcp_p[k],
+                                  "orientation_xyzw": tcp_q[k]}, tk)
+        t_ns += int(round((r.steps + 1) * r.extra["dt"] * 1e9))
+        w.write("/eval/episode_metrics", m, t_ns)
+        w.flush()
+    w.close()
+    os.replace(tmp, path)

@@ -1,0 +1,108 @@
+"""Deterministic evaluation of a trained policy on an episode plan; records control-rate setpoints."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import torch
+from tensordict import TensorDict
+from torch import Tensor
+
+from pathrl.envs.tracking import PathTrackingEnv
+from pathrl.limits.integrate import interpolate_step
+from pathrl.paths.segments import Segments
+
+Policy = Callable[[TensorDict], Tensor]
+
+
+@dataclass
+class EpisodeRecord:
+    """One evaluated episode. Arrays are at decision steps (T+1 incl. the start) and control rate."""
+
+    episode: int
+    path: int
+    start_s: float
+    end_s: float
+    steps: int
+    termination: str  # robot_stopped | deviation | time_out
+    reached_end: bool
+    finish_step: int  # step in which the end of the path was reached (-1: never)
+    pos: Tensor  # (T+1, D) decision-step states
+    vel: Tensor
+    acc: Tensor
+    setpoints: Tensor  # (T*C+1, D) control-rate positions incl. the start
+    setpoint_vel: Tensor
+    setpoint_acc: Tensor
+    extra: dict = field(default_factory=dict)
+
+    @property
+    def duration_s(self) -> float:
+        return float(self.extra["dt"]) * self.steps
+
+
+def rollout(env: PathTrackingEnv, policy: Policy, plan: Segments, progress: Callable[[int], None] | None = None,
+            ) -> list[EpisodeRecord]:
+    """Run every segment of `plan` once with `policy` (batches of env.num_envs); no auto-reset."""
+    records: list[EpisodeRecord] = []
+    n = env.num_envs
+    c = int(round(env.cfg.control_rate * env.cfg.dt))
+    for b0 in range(0, len(plan), n):
+        ids = torch.arange(b0, min(b0 + n, len(plan)))
+        records += _rollout_batch(env, policy, plan, ids, c)
+        if progress is not None:
+            progress(len(ids))
+    return records
+
+
+def _rollout_batch(env: PathTrackingEnv, policy: Policy, plan: Segments, ids: Tensor, c: int) -> list[EpisodeRecord]:
+    k = len(ids)
+    dev = env.device
+    env_ids = torch.arange(k, device=dev)
+    seg = Segments(plan.path[ids].to(dev), plan.start_s[ids].to(dev), plan.end_s[ids].to(dev), plan.end_knot[ids].to(dev))
+    env.start_segments(env_ids, seg)
+    active = torch.zeros(env.num_envs, dtype=torch.bool, device=dev)
+    active[:k] = True
+    done_step = torch.full((env.num_envs,), -1, dtype=torch.long, device=dev)
+    term = ["time_out"] * k
+    states = [(env.pos.clone(), env.vel.clone(), env.acc.clone())]
+    max_steps = int(math.ceil(float(env.budget[:k].max()))) + 1
+    for t in range(max_steps):
+        with torch.inference_mode():
+            actions = policy(env.get_observations())
+        _, _, dones, _ = env.step(actions)
+        states.append((env.pos.clone(), env.vel.clone(), env.acc.clone()))
+        newly = dones & active & (done_step < 0)
+        if bool(newly.any()):
+            done_step[newly] = t + 1
+            info = env.last_step
+            for i in newly.nonzero().squeeze(1).tolist():
+                term[i] = ("robot_stopped" if bool(info["stopped"][i]) else
+                           "deviation" if bool(info["dev_terminated"][i]) else "time_out")
+        if bool((done_step[:k] >= 0).all()):
+            break
+    pos = torch.stack([s[0] for s in states], 1)  # (N, T+1, D)
+    vel = torch.stack([s[1] for s in states], 1)
+    acc = torch.stack([s[2] for s in states], 1)
+    out = []
+    for i in range(k):
+        steps = int(done_step[i]) if int(done_step[i]) > 0 else pos.shape[1] - 1
+        p, v, a = pos[i, : steps + 1], vel[i, : steps + 1], acc[i, : steps + 1]
+        sp, sv, sa = interpolate_step(p[:-1], v[:-1], a[:-1], a[1:], env.cfg.dt, c)  # (T, C, D)
+        out.append(EpisodeRecord(
+            episode=int(ids[i]),
+            path=int(seg.path[i]),
+            start_s=float(seg.start_s[i]),
+            end_s=float(seg.end_s[i]),
+            steps=steps,
+            termination=term[i],
+            reached_end=bool(env.finish_step[i] >= 0),
+            finish_step=int(env.finish_step[i]),
+            pos=p.cpu(), vel=v.cpu(), acc=a.cpu(),
+            setpoints=torch.cat([p[:1], sp.reshape(-1, p.shape[1])]).cpu(),
+            setpoint_vel=torch.cat([v[:1], sv.reshape(-1, p.shape[1])]).cpu(),
+            setpoint_acc=torch.cat([a[:1], sa.reshape(-1, p.shape[1])]).cpu(),
+            extra={"dt": env.cfg.dt, "control_dt": env.cfg.dt / c},
+        ))
+    return out

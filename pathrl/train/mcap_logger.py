@@ -1,0 +1,69 @@
+"""RSL-RL log writer that records a training run into ``run.mcap`` (resolved config once, scalars per iteration).
+
+Topics: ``/run/config`` (once: the resolved pathrl config and the RSL-RL train cfg),
+``/train/scalars`` (per iteration: {"iteration", "values": {tag: value}}). The file is flushed after
+every iteration, so a killed run keeps everything up to its last finished iteration.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any
+
+from rsl_rl.utils.log_writer import LogWriter
+
+from pathrl.logging.mcap_io import McapJsonWriter, iter_messages
+
+
+class McapLogWriter(LogWriter):
+    """Buffers the scalars of one iteration and writes them as one message when the iteration changes."""
+
+    def __init__(self, log_dir: str, file_name: str = "run.mcap", run_config: dict | None = None) -> None:
+        self.path = Path(log_dir) / file_name
+        kept = _salvage(self.path)  # resume: keep what an earlier (possibly killed) run logged
+        self.writer = McapJsonWriter(self.path)
+        self._config_written = False
+        for topic, t, obj in kept:
+            self.writer.write(topic, obj, t)
+            self._config_written |= topic == "/run/config"
+        self.writer.flush()
+        self.run_config = run_config
+        self._step: int | None = None
+        self._values: dict[str, float] = {}
+
+    def store_config(self, env_cfg: Any, train_cfg: dict) -> None:
+        if not self._config_written:
+            agent = {k: v for k, v in train_cfg.items() if k != "logger"}
+            self.writer.write("/run/config", {"config": self.run_config or str(env_cfg), "train_cfg": agent})
+            self._config_written = True
+            self.writer.flush()
+
+    def add_scalar(self, tag: str, scalar_value: float, global_step: int) -> None:
+        if self._step is not None and global_step != self._step:
+            self._emit()
+        self._step = int(global_step)
+        self._values[tag] = float(scalar_value)
+
+    def _emit(self) -> None:
+        if self._step is not None and self._values:
+            self.writer.write("/train/scalars", {"iteration": self._step, "values": self._values})
+            self.writer.flush()
+        self._values = {}
+
+    def flush(self) -> None:
+        self._emit()
+
+    def stop(self) -> None:
+        self._emit()
+        self.writer.close()
+
+
+def _salvage(path: Path) -> list[tuple[str, int, Any]]:
+    """Messages of an existing run.mcap (finished or not); the old file is replaced afterwards."""
+    if not path.exists():
+        return []
+    msgs = list(iter_messages(path))
+    os.replace(path, path.with_suffix(".mcap.prev"))
+    os.remove(path.with_suffix(".mcap.prev"))
+    return msgs

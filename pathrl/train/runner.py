@@ -1,0 +1,166 @@
+"""Build a run from a resolved config: dataset -> env -> RSL-RL OnPolicyRunner; train with checkpoints and resume."""
+
+from __future__ import annotations
+
+import copy
+import json
+import os
+import re
+import time
+from pathlib import Path
+from typing import Any
+
+import torch
+import yaml
+from rsl_rl.runners import OnPolicyRunner
+
+from pathrl.dataset.io import load_pathset
+from pathrl.envs.rewards import build_reward_terms
+from pathrl.envs.tracking import PathTrackingEnv, TrackingEnvCfg
+from pathrl.paths.knots import KnotStrategy
+from pathrl.robot.model import RobotSpec, load_robot
+
+CHECKPOINT_RE = re.compile(r"^model_(\d+)\.pt$")
+
+
+def env_cfg_from(cfg: dict[str, Any], num_envs: int | None = None, seed: int | None = None,
+                 knot_gap_norm: float | None = None) -> TrackingEnvCfg:
+    e = cfg["env"]
+    return TrackingEnvCfg(
+        num_envs=int(num_envs or e["num_envs"]),
+        device=str(cfg.get("device", "cpu")),
+        seed=int(cfg.get("seed", 0) if seed is None else seed),
+        dt=float(e["dt"]),
+        control_rate=float(e["control_rate"]),
+        substeps=int(e["substeps"]),
+        episode_budget_s=float(e["episode_budget_s"]),
+        scale_budget=bool(e["scale_budget"]),
+        segments=str(e["segments"]),
+        start_range=tuple(float(x) for x in e["start_range"]),
+        min_fraction=float(e["min_fraction"]),
+        max_deviation=None if e["max_deviation"] is None else float(e["max_deviation"]),
+        stop_tolerance=float(e["stop_tolerance"]),
+        stop_bonus=bool(e["stop_bonus"]),
+        knot_gap_norm=knot_gap_norm,
+        n_state=int(cfg["knots"]["n_state"]),
+    )
+
+
+def build_env(
+    cfg: dict[str, Any],
+    split: str = "train",
+    num_envs: int | None = None,
+    dataset_path: str | None = None,
+    knot_gap_norm: float | None = None,
+    seed: int | None = None,
+) -> PathTrackingEnv:
+    """The tracking env of a resolved config on a dataset split."""
+    robot: RobotSpec = load_robot(cfg["robot"])
+    knots = KnotStrategy.from_cfg(cfg["knots"])
+    paths = load_pathset(dataset_path or cfg["dataset"]["path"], split, knots, robot=robot)
+    env_cfg = env_cfg_from(cfg, num_envs, seed, knot_gap_norm)
+    return PathTrackingEnv(env_cfg, robot, paths, build_reward_terms(cfg["reward"]["terms"]))
+
+
+def rsl_train_cfg(cfg: dict[str, Any], run_dir: Path) -> dict[str, Any]:
+    """RSL-RL train cfg: the agent config verbatim plus our MCAP log writer."""
+    agent = copy.deepcopy(cfg["agent"])
+    agent["logger"] = {"class_name": "pathrl.train.mcap_logger:McapLogWriter", "run_config": cfg}
+    return agent
+
+
+class PathRLRunner(OnPolicyRunner):
+    """OnPolicyRunner with atomic checkpoints and safe (weights-only) loading."""
+
+    def save(self, path: str, infos: dict | None = None) -> None:
+        saved = self.alg.save()
+        saved["iter"] = self.current_learning_iteration
+        saved["infos"] = infos
+        tmp = f"{path}.tmp"
+        torch.save(saved, tmp)
+        os.replace(tmp, path)
+        self.logger.save_model(path, self.current_learning_iteration)
+
+    def load(self, path: str, load_cfg: dict | None = None, strict: bool = True, map_location: str | None = None) -> dict:
+        loaded = torch.load(path, weights_only=True, map_location=map_location)
+        if self.alg.load(loaded, load_cfg, strict):
+            self.current_learning_iteration = int(loaded["iter"])
+        return loaded.get("infos") or {}
+
+
+def latest_checkpoint(run_dir: Path) -> Path | None:
+    """The checkpoint with the highest iteration in `run_dir`, if any."""
+    best: tuple[int, Path] | None = None
+    for p in Path(run_dir).glob("model_*.pt"):
+        m = CHECKPOINT_RE.match(p.name)
+        if m and (best is None or int(m.group(1)) > best[0]):
+            best = (int(m.group(1)), p)
+    return None if best is None else best[1]
+
+
+def write_json_atomic(path: Path, obj: Any) -> None:
+    tmp = path.with_suffix(path.suffix + ".tmp")
+    tmp.write_text(json.dumps(obj, indent=2, default=str))
+    os.replace(tmp, path)
+
+
+def train(cfg: dict[str, Any], run_dir: Path, resume: bool = False) -> dict[str, Any]:
+    """Train (or resume) a policy; writes config.yaml, checkpoints, run.mcap and summary.json into `run_dir`."""
+    torch.set_num_threads(int(cfg.get("threads", 1)))
+    torch.manual_seed(int(cfg["seed"]))
+    run_dir.mkdir(parents=True, exist_ok=True)
+    ckpt = latest_checkpoint(run_dir)
+    if ckpt is not None and not resume:
+        raise FileExistsError(f"{run_dir} already holds checkpoints; pass resume=true or choose another run_dir")
+    if resume and (run_dir / "config.yaml").exists():
+        saved = yaml.safe_load((run_dir / "config.yaml").read_text())
+        diff = _config_diff(saved, cfg, ignore={"resume", "iterations"})
+        if diff:
+            raise ValueError(f"resume with a different config ({diff}); use the same overrides or a new run_dir")
+    tmp = run_dir / "config.yaml.tmp"
+    tmp.write_text(yaml.safe_dump(cfg, sort_keys=False))
+    os.replace(tmp, run_dir / "config.yaml")
+
+    env = build_env(cfg, "train")
+    train_cfg = rsl_train_cfg(cfg, run_dir)
+    runner = PathRLRunner(env, train_cfg, log_dir=str(run_dir), device=cfg.get("device", "cpu"))
+    done_before = 0
+    if resume and ckpt is not None:
+        runner.load(str(ckpt))
+        runner.current_learning_iteration += 1  # the checkpoint's iteration is finished
+        done_before = runner.current_learning_iteration
+    total = int(cfg["iterations"])
+    remaining = max(total - done_before, 0)
+    t0 = time.perf_counter()
+    if remaining:
+        runner.learn(num_learning_iterations=remaining)
+    wall = time.perf_counter() - t0
+    steps_per_iter = int(train_cfg["num_steps_per_env"]) * env.num_envs
+    prev = {}
+    if (run_dir / "summary.json").exists():
+        prev = json.loads((run_dir / "summary.json").read_text())
+    summary = {
+        "experiment": cfg["experiment"],
+        "iterations": total,
+        "env_steps": total * steps_per_iter,
+        "wall_time_s": float(prev.get("wall_time_s", 0.0)) + wall,
+        "num_envs": env.num_envs,
+        "steps_per_iteration": steps_per_iter,
+        "knot_gap_norm": env.knot_gap,
+        "checkpoint": latest_checkpoint(run_dir).name if latest_checkpoint(run_dir) else None,
+        "mean_reward": float(torch.tensor(list(runner.logger.rewbuffer)).mean()) if runner.logger.rewbuffer else None,
+    }
+    write_json_atomic(run_dir / "summary.json", summary)
+    return summary
+
+
+def _config_diff(a: Any, b: Any, ignore: set[str], prefix: str = "") -> str:
+    if isinstance(a, dict) and isinstance(b, dict):
+        for k in sorted(set(a) | set(b)):
+            if not prefix and k in ignore:
+                continue
+            d = _config_diff(a.get(k), b.get(k), ignore, f"{prefix}{k}.")
+            if d:
+                return d
+        return ""
+    return "" if a == b else f"{prefix.rstrip('.')}: {a!r} != {b!r}"

@@ -1,0 +1,116 @@
+"""Dataset generators: invariants of generated paths (limits, collisions, lengths, ball constraints)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+from omegaconf import OmegaConf
+
+from pathrl.dataset.generate import ball_constraint_violation, generate_dataset, resolve_params
+from pathrl.dataset.io import DatasetError, load_dataset, load_pathset
+from pathrl.paths.knots import KnotStrategy
+from pathrl.paths.spline import sample_uniform
+from pathrl.robot.model import CONF_DIR, load_robot_by_name
+
+torch.set_num_threads(1)
+
+
+def robot_cfg(name: str) -> dict:
+    return OmegaConf.to_container(OmegaConf.load(CONF_DIR / "robot" / f"{name}.yaml"), resolve=True)
+
+
+def dataset_cfg(kind: str, **params) -> dict:
+    cfg = OmegaConf.to_container(OmegaConf.load(CONF_DIR / "dataset" / f"{kind}.yaml"), resolve=False)
+    cfg.update(num_train=4, num_test=2, seed=5, params={"chunk_size": 2, **params})
+    return cfg
+
+
+@pytest.fixture(scope="module")
+def checker():
+    from pathrl.robot.collision import CollisionChecker
+
+    cc = CollisionChecker(load_robot_by_name("iiwa7"))
+    yield cc
+    cc.close()
+
+
+def _check_paths(ds, spec, checker, lo, hi, step=0.02, tol=1e-3):
+    for split, n in (("train", 4), ("test", 2)):
+        sp = ds.splits[split]
+        assert len(sp) == n
+        for knots in sp.knots:
+            q, length = sample_uniform(knots, step)
+            assert lo - 0.1 <= length <= hi + 0.05, length
+            assert np.all(q >= spec.pos_limits[:, 0] - tol) and np.all(q <= spec.pos_limits[:, 1] + tol)
+            assert not checker.in_collision(q).any()
+    # train and test come from disjoint streams
+    assert not any(np.array_equal(a, b) for a in ds.splits["train"].knots for b in ds.splits["test"].knots)
+
+
+@pytest.mark.parametrize("kind, length", [("random", [4.0, 5.0]), ("target_point", [5.0, 6.0])])
+def test_limit_respecting_generators(tmp_path, checker, kind, length):
+    spec = load_robot_by_name("iiwa7")
+    ds = generate_dataset(robot_cfg("iiwa7"), dataset_cfg(kind, length_range=length), dest=tmp_path / kind,
+                          progress=False)
+    loaded = load_dataset(tmp_path / kind, spec)
+    assert loaded.content_hash == ds.content_hash
+    assert loaded.meta["kind"] == kind and loaded.meta["seed"] == 5
+    assert loaded.meta["generator"]["params"]["length_range"] == length
+    _check_paths(loaded, spec, checker, *length)
+    # stored knots are distance-resampled at 0.1 rad
+    gaps = np.linalg.norm(np.diff(loaded.splits["test"].knots[0], axis=0), axis=1)
+    assert np.median(gaps) == pytest.approx(0.1, abs=0.005)
+    # the default (curvature) strategy was cached at generation: loading it needs no resampling
+    assert list((tmp_path / kind / ".cache").glob("test-*-curvature_0.3_0.1.npz"))
+    ps = load_pathset(tmp_path / kind, "test", KnotStrategy("curvature", 0.3), spec)
+    assert ps.num_paths == 2
+    # deterministic: same seed -> same content
+    ds2 = generate_dataset(robot_cfg("iiwa7"), dataset_cfg(kind, length_range=length), dest=tmp_path / "again",
+                           progress=False)
+    assert ds2.content_hash == ds.content_hash
+
+
+def test_ball_balancing_paths_keep_plate_horizontal(tmp_path, checker):
+    from pathrl.robot.kinematics import ForwardKinematics
+
+    spec = load_robot_by_name("iiwa7")
+    generate_dataset(robot_cfg("iiwa7"), dataset_cfg("ball_balancing"), dest=tmp_path / "ball", progress=False)
+    ds = load_dataset(tmp_path / "ball", spec)
+    _check_paths(ds, spec, checker, 3.2, 5.1, tol=1e-9)
+    fk = ForwardKinematics(spec)
+    for knots in ds.splits["train"].knots + ds.splits["test"].knots:
+        q, _ = sample_uniform(knots, 0.01)
+        assert ball_constraint_violation(q).max() < 1e-9
+        assert np.abs(q[:, 6]).max() <= 0.009
+        _, rot = fk.link_transforms(torch.as_tensor(q), ["iiwa_link_7"])
+        z_axis = rot[:, 0, :, 2].numpy()  # flange z axis in the base frame
+        np.testing.assert_allclose(z_axis, np.tile([0.0, 0.0, 1.0], (len(q), 1)), atol=1e-9)
+        gaps = np.linalg.norm(np.diff(knots, axis=0), axis=1)
+        assert np.median(gaps) == pytest.approx(0.3, abs=0.01)
+
+
+def test_ball_balancing_rejects_other_robots(tmp_path):
+    with pytest.raises(DatasetError, match="iiwa7 only"):
+        generate_dataset(robot_cfg("armar6"), dataset_cfg("ball_balancing"), dest=tmp_path / "x", progress=False)
+    assert not (tmp_path / "x").exists()
+
+
+def test_params_validation():
+    p = resolve_params("random", "armar4", {})
+    assert p["length_range"] == [18.0, 22.9]
+    assert resolve_params("random", "unknown_robot", {})["length_range"] == [19.5, 26.0]
+    with pytest.raises(DatasetError, match="unknown keys"):
+        resolve_params("random", "iiwa7", {"lenght_range": [1, 2]})
+    with pytest.raises(DatasetError, match="length_range"):
+        resolve_params("random", "iiwa7", {"length_range": [5, 1]})
+    with pytest.raises(DatasetError, match="unknown generator"):
+        resolve_params("spiral", "iiwa7", {})
+
+
+@pytest.mark.parametrize("kind", ["random", "target_point", "ball_balancing"])
+def test_conf_params_match_code_defaults(kind):
+    from pathrl.dataset.generate import DEFAULT_PARAMS
+
+    cfg = OmegaConf.to_container(OmegaConf.load(CONF_DIR / "dataset" / f"{kind}.yaml"))
+    assert cfg["params"] == DEFAULT_PARAMS[kind]

@@ -1,0 +1,190 @@
+"""Benchmarks (`make bench`): env steps/s (batched vs single-env reference), PPO iteration time, and the
+time per decision of policy + limits for one env. Writes bench/results.json and prints a table.
+
+Paths are synthetic smooth paths inside the joint limits (no dataset needed), so the numbers measure
+the env itself. Threads: 1 (fastest for these sizes on the 2-core reference machine).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import time
+from pathlib import Path
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+import numpy as np  # noqa: E402
+import torch  # noqa: E402
+
+from pathrl.envs.rewards import build_reward_terms  # noqa: E402
+from pathrl.envs.tracking import PathTrackingEnv, TrackingEnvCfg  # noqa: E402
+from pathrl.paths.pathset import build_pathset  # noqa: E402
+from pathrl.robot.model import RobotSpec, load_robot_by_name  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+REWARD = {"path_length": {"weight": 2.0}, "deviation_max": {"weight": 0.9}, "deviation_mean": {"weight": 0.9},
+          "action_saturation": {"weight": 0.4}}
+
+
+def synthetic_knots(robot: RobotSpec, n_paths: int, seed: int = 0) -> list[np.ndarray]:
+    """Smooth random paths (sums of sinusoids) inside the middle of each path joint's range."""
+    rng = np.random.default_rng(seed)
+    lim = robot.pos_limits[robot.path_index]
+    mid, half = lim.mean(1), 0.4 * (lim[:, 1] - lim[:, 0]) / 2
+    t = np.linspace(0, 1, 150)[:, None]
+    out = []
+    for _ in range(n_paths):
+        f = rng.uniform(0.5, 2.0, (1, len(mid)))
+        ph = rng.uniform(0, 2 * np.pi, (1, len(mid)))
+        out.append(mid + half * np.sin(2 * np.pi * f * t + ph))
+    return out
+
+
+def make_env(robot: RobotSpec, num_envs: int, seed: int = 0) -> PathTrackingEnv:
+    knots = synthetic_knots(robot, 64, seed)
+    paths = build_pathset(knots, [f"p{i}" for i in range(len(knots))])
+    cfg = TrackingEnvCfg(num_envs=num_envs, seed=seed, n_state=9)
+    return PathTrackingEnv(cfg, robot, paths, build_reward_terms(REWARD))
+
+
+def bench_env(robot_name: str, num_envs: int, seconds: float) -> dict:
+    robot = load_robot_by_name(robot_name)
+    env = make_env(robot, num_envs)
+    gen = torch.Generator().manual_seed(0)
+    actions = [torch.rand(num_envs, robot.dof, generator=gen) * 2 - 1 for _ in range(8)]
+    for k in range(5):
+        env.step(actions[k % 8])
+    steps, t0 = 0, time.perf_counter()
+    while time.perf_counter() - t0 < seconds:
+        env.step(actions[steps % 8])
+        steps += 1
+    dt = time.perf_counter() - t0
+    return {"robot": robot_name, "num_envs": num_envs, "steps": steps, "env_steps_per_s": steps * num_envs / dt}
+
+
+def bench_reference(robot_name: str, seconds: float) -> dict:
+    from pathrl.envs.reference import ReferencePath, ReferenceTrackingEnv
+    from pathrl.limits.braking import braking_acceleration
+    from pathrl.limits.feasible import JointLimits
+
+    robot = load_robot_by_name(robot_name)
+    knots = synthetic_knots(robot, 1)[0]
+    path = ReferencePath(knots)
+    lim = JointLimits.from_robot(robot)
+
+    def brake(p, v, a):
+        t = [torch.as_tensor(x).unsqueeze(0) for x in (p, v, a)]
+        return braking_acceleration(*t, lim, 0.1)[0].numpy()
+
+    def make():
+        return ReferenceTrackingEnv(robot, path, 0.0, len(path.knots) - 1, build_reward_terms(REWARD),
+                                    knot_gap=float(np.diff(path.knot_s).max()), braking=brake)
+
+    env = make()
+    rng = np.random.default_rng(0)
+    steps, t0 = 0, time.perf_counter()
+    while time.perf_counter() - t0 < seconds:
+        r = env.step(rng.uniform(-1, 1, robot.dof))
+        env.observation()
+        steps += 1
+        if r.terminated or r.time_out:
+            env = make()
+    dt = time.perf_counter() - t0
+    return {"robot": robot_name, "steps": steps, "env_steps_per_s": steps / dt}
+
+
+def bench_ppo_iteration(num_envs: int, iterations: int) -> dict:
+    import yaml
+    from rsl_rl.runners import OnPolicyRunner
+
+    robot = load_robot_by_name("iiwa7")
+    env = make_env(robot, num_envs)
+    agent = yaml.safe_load((ROOT / "conf/agent/ppo.yaml").read_text())
+    runner = OnPolicyRunner(env, agent, log_dir=None, device="cpu")
+    runner.learn(1)
+    t0 = time.perf_counter()
+    runner.learn(iterations)
+    dt = (time.perf_counter() - t0) / iterations
+    samples = agent["num_steps_per_env"] * num_envs
+    return {"num_envs": num_envs, "steps_per_env": agent["num_steps_per_env"], "s_per_iteration": dt,
+            "samples_per_s": samples / dt}
+
+
+def bench_decision(robot_name: str, repeats: int = 300) -> dict:
+    """Time of one decision for one env: observation -> policy (MLP 256-128) -> limits -> setpoints."""
+    from pathrl.limits.feasible import JointLimits, action_to_acceleration, valid_acceleration_range
+    from pathrl.limits.integrate import interpolate_step
+
+    robot = load_robot_by_name(robot_name)
+    env = make_env(robot, 1)
+    obs = env.get_observations()["policy"]
+    mlp = torch.nn.Sequential(torch.nn.Linear(obs.shape[1], 256), torch.nn.ELU(), torch.nn.Linear(256, 128),
+                              torch.nn.ELU(), torch.nn.Linear(128, robot.dof))
+    lim = JointLimits.from_robot(robot)
+    p, v, a = env.pos.clone(), env.vel.clone(), env.acc.clone()
+    times = []
+    with torch.inference_mode():
+        for _ in range(repeats):
+            t0 = time.perf_counter()
+            act = mlp(obs).to(torch.float64)
+            lo, hi = valid_acceleration_range(p, v, a, lim, 0.1)
+            a1 = action_to_acceleration(act.clamp(-1, 1), lo, hi)
+            interpolate_step(p, v, a, a1, 0.1, 24)
+            times.append(time.perf_counter() - t0)
+    t = np.array(times[10:])
+    return {"robot": robot_name, "mean_ms": 1e3 * t.mean(), "max_ms": 1e3 * t.max(),
+            "max_pct_of_step": 100 * t.max() / 0.1}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--seconds", type=float, default=5.0, help="time per env benchmark")
+    ap.add_argument("--quick", action="store_true", help="tiny sizes (tests)")
+    ap.add_argument("--out", default=str(ROOT / "bench" / "results.json"))
+    args = ap.parse_args()
+    torch.set_num_threads(1)
+    sec = 0.5 if args.quick else args.seconds
+    n = 256 if args.quick else 4096
+    res = {"machine": {"cpus": os.cpu_count(), "platform": platform.platform(), "torch": torch.__version__,
+                       "threads": torch.get_num_threads()}}
+    res["env_iiwa7"] = bench_env("iiwa7", n, sec)
+    res["env_armar4_legs"] = bench_env("armar4_legs", n, sec)
+    res["reference_iiwa7"] = bench_reference("iiwa7", sec)
+    res["batched_over_reference_iiwa7"] = res["env_iiwa7"]["env_steps_per_s"] / res["reference_iiwa7"]["env_steps_per_s"]
+    res["ppo_iteration_iiwa7"] = bench_ppo_iteration(n, 1 if args.quick else 3)
+    res["decision_iiwa7"] = bench_decision("iiwa7")
+    res["decision_armar4_legs"] = bench_decision("armar4_legs")
+    res["decision_armar6"] = bench_decision("armar6")
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out.with_suffix(".json.tmp")
+    tmp.write_text(json.dumps(res, indent=2))
+    os.replace(tmp, out)
+    _print(res, out)
+
+
+def _print(res: dict, out: Path) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    t = Table(title=f"pathrl benchmarks -> {out}")
+    t.add_column("benchmark")
+    t.add_column("result", justify="right")
+    t.add_row(f"env iiwa7, {res['env_iiwa7']['num_envs']} envs", f"{res['env_iiwa7']['env_steps_per_s']:,.0f} steps/s")
+    t.add_row(f"env armar4_legs (30 joints), {res['env_armar4_legs']['num_envs']} envs",
+              f"{res['env_armar4_legs']['env_steps_per_s']:,.0f} steps/s")
+    t.add_row("single-env reference iiwa7", f"{res['reference_iiwa7']['env_steps_per_s']:,.0f} steps/s")
+    t.add_row("batched / reference (iiwa7)", f"{res['batched_over_reference_iiwa7']:,.0f} x")
+    p = res["ppo_iteration_iiwa7"]
+    t.add_row(f"PPO iteration ({p['num_envs']} envs x {p['steps_per_env']} steps)", f"{p['s_per_iteration']:.2f} s")
+    for k in ("decision_iiwa7", "decision_armar6", "decision_armar4_legs"):
+        d = res[k]
+        t.add_row(f"policy + limits per decision, {d['robot']}", f"{d['mean_ms']:.2f} ms (max {d['max_pct_of_step']:.1f} % of 0.1 s)")
+    Console().print(t)
+
+
+if __name__ == "__main__":
+    main()
