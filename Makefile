@@ -6,7 +6,7 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 export OMP_NUM_THREADS ?= 1
 
-.PHONY: setup test lint bench reproduce-tables datasets clean
+.PHONY: setup test lint bench reproduce-tables datasets view-demo clean
 
 setup: $(STAMP)
 
@@ -29,6 +29,9 @@ bench: setup
 
 reproduce-tables: setup
 	$(PY) tools/reproduce_tables.py $(if $(PROFILE),--profile $(PROFILE)) $(if $(TRAIN),--train)
+
+view-demo: setup
+	tools/view_demo.sh
 
 clean:
 	rm -rf outputs multirun .pytest_cache

@@ -1,4 +1,4 @@
-"""``pathrl-dataset`` smoke runs: generate, import, info, bad arguments (exit 2, one line, nothing written)."""
+"""``pathrl-dataset`` smoke runs: generate, import, info, bad input (exit 2, one line, nothing written)."""
 
 from __future__ import annotations
 
@@ -6,16 +6,23 @@ import json
 
 import numpy as np
 import pytest
+from test_dataset_kiemel import write_set
 
 from pathrl.cli.dataset import main
 from pathrl.dataset.io import load_dataset
-from test_dataset_kiemel import write_set
 
 
 def test_generate_and_info(tmp_path, capsys):
     dest = tmp_path / "ball"
-    args = ["generate", "robot=iiwa7", "dataset=ball_balancing", "dataset.num_train=2", "dataset.num_test=2",
-            f"dataset.path={dest}", "workers=1"]
+    args = [
+        "generate",
+        "robot=iiwa7",
+        "dataset=ball_balancing",
+        "dataset.num_train=2",
+        "dataset.num_test=2",
+        f"dataset.path={dest}",
+        "workers=1",
+    ]
     assert main(args) == 0
     out = capsys.readouterr().out
     assert f"wrote {dest}" in out and "train 2, test 2" in out

@@ -268,12 +268,7 @@ def _violations(
     m = q.shape[1]
     pos_lim = pos if pos is not None else np.tile([-np.inf, np.inf], (m, 1))
     jerk_lim = jerk if jerk is not None else np.full(m, np.inf)
-    limits = JointLimits(
-        pos=torch.as_tensor(pos_lim, dtype=torch.float64),
-        vel=torch.as_tensor(vel, dtype=torch.float64),
-        acc=torch.as_tensor(acc, dtype=torch.float64),
-        jerk=torch.as_tensor(jerk_lim, dtype=torch.float64),
-    )
+    limits = JointLimits.from_arrays(pos_lim, vel, acc, jerk_lim)
     t = lambda a: torch.as_tensor(a, dtype=torch.float64)  # noqa: E731
     out = limit_violations(t(q), t(qd), t(qdd), limits, 1.0 / control_rate, CHECK_RTOL)
     return {k: int(torch.as_tensor(v).sum()) for k, v in out.items()}

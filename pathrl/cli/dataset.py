@@ -41,9 +41,15 @@ def _fmt_stats(st: Mapping[str, Any]) -> str:
 def print_info(meta: Mapping[str, Any], path: str, out=None) -> None:
     out = out or sys.stdout
     print(f"dataset   {path}", file=out)
-    print(f"format    {meta.get('format')}  source {meta.get('source')}  created {meta.get('created')}", file=out)
-    print(f"robot     {meta.get('robot')}  kind {meta.get('kind')}  seed {meta.get('seed')}  "
-          f"path joints {len(meta.get('path_joints', []))}", file=out)
+    print(
+        f"format    {meta.get('format')}  source {meta.get('source')}  created {meta.get('created')}",
+        file=out,
+    )
+    print(
+        f"robot     {meta.get('robot')}  kind {meta.get('kind')}  seed {meta.get('seed')}  "
+        f"path joints {len(meta.get('path_joints', []))}",
+        file=out,
+    )
     print(f"hash      {meta.get('content_hash')}", file=out)
     print("splits    " + ", ".join(f"{s} {n}" for s, n in meta.get("splits", {}).items()), file=out)
     if meta.get("default_knots"):

@@ -13,12 +13,13 @@ from pathlib import Path
 import hydra
 from omegaconf import DictConfig, OmegaConf
 
+from pathrl.cli.common import CONF_DIR
 from pathrl.config.store import register
 
 register()
 
 
-@hydra.main(version_base="1.3", config_path="../../conf", config_name="train")
+@hydra.main(version_base="1.3", config_path=str(CONF_DIR), config_name="train")
 def _app(cfg: DictConfig) -> float:
     from pathrl.dataset.io import DatasetError
     from pathrl.train.runner import train

@@ -26,18 +26,28 @@ applied at load time (:func:`pathrl.dataset.io.load_pathset`).
       mean 22.9). Default ranges per robot are chosen to match the released sets' mean and maximum:
       iiwa7 U(19.5, 26.0), armar6 U(21.6, 25.5), armar4 U(18.0, 22.9);
     * the recorded positions (path joints) are cut at the target length, a natural cubic spline is
-      put through them and resampled every 0.1 rad.
+      put through them and resampled every 0.1 rad;
+    * motions use the position limits shrunk by ``limit_margin`` (0.02 rad): where a joint turns at
+      its limit, the spline through 0.1 rad knots overshoots by up to ~0.01 rad; the stored path is
+      then checked (limits every 0.01 rad, collisions every ``check_spacing`` rad) and rejected if bad;
+    * with uniform random actions (no smoothing) the curvature-resampled knot counts match the
+      released sets without tuning (iiwa ~152 knots for ~22.7 rad vs 151 for 22.9).
 ``target_point`` (paper: a policy reaching random Cartesian target points):
     * same start as ``random``; then a sequence of goals: a Cartesian point per TCP drawn uniformly in
-      the workspace box, solved by damped-least-squares IK on the torch FK (seeded near the current
-      configuration, within position limits, collision free, >= ``min_goal_distance`` rad away);
+      the workspace box (restricted to 5 cm voxels the TCP reaches in 20 000 random configurations,
+      which avoids hopeless IK problems), solved by damped-least-squares IK on the torch FK (seeded
+      near the previous goal, within position limits, collision free, >= ``min_goal_distance`` rad
+      away); goals are solved in batches and queued per candidate (``goal_batch``);
     * the robot moves toward the current goal with a limit-respecting motion: per joint a critically
       damped PD acceleration (``gain`` omega in 1/s) plus uniform action noise (``action_noise``) is
       mapped into the valid acceleration range; when the configuration is within ``goal_tolerance`` rad
       (path joints, Euclidean) of the goal, the next goal is drawn (a checkpoint); on a collision the
       candidate is rewound to the last goal switch and gets a new goal;
     * recorded, cut at a target length from U(length_range) (iiwa7 U(22.0, 28.9), armar4 U(23.7, 29.4),
-      matching the released sets' mean and maximum), splined and resampled every 0.1 rad as above.
+      matching the released sets' mean and maximum), splined, resampled every 0.1 rad and checked as
+      above. gain 3, action_noise 0.1 and goal_tolerance 0.4 were chosen so that the curvature knot
+      count matches the released set (~160 knots for ~25.5 rad): a noise-free PD that nearly stops at
+      every goal gives ~290, a larger tolerance without noise ~130.
 ``ball_balancing`` (iiwa7 only; original_pathtracking.md 8.1):
     * paths in the plate-horizontal subspace q3 = q5 = 0, q6 = q4 - q2 (joint axes 2, 4, 6 are +y, -y,
       +y, so the flange z axis stays vertical and points up) and |q7| <= 0.009: a natural spline through
@@ -47,9 +57,10 @@ applied at load time (:func:`pathrl.dataset.io.load_pathset`).
       every spline through such knots satisfies them exactly;
     * cut at a length L = lo + (hi - lo) * Beta(length_beta) with (lo, hi) = (3.2, 5.1) (released set:
       3.23 / 3.79 / 5.10 rad min / mean / max; Beta(1.5, 3.5) has mean 0.3 -> 3.77 rad);
-    * every point (sampled every ``check_spacing`` rad) within the position limits, collision free and
-      with the TCP in the workspace box; stored knots resampled every 0.3 rad (the authors' distance
-      knots for this set).
+    * stored knots resampled every 0.3 rad (the authors' distance knots for this set); the stored
+      path must have a length within (lo, hi) (rare sharp turns get cut short by the knot spacing) and
+      every point (sampled every ``check_spacing`` rad) within the position limits, collision free and
+      with the TCP in the workspace box.
 """
 
 from __future__ import annotations
@@ -73,34 +84,42 @@ from pathrl.dataset.io import (
     write_cache,
 )
 from pathrl.paths.knots import KnotStrategy
-from pathrl.paths.spline import PathError, dedupe_knots, fit_spline, resample_by_distance, sample_uniform
+from pathrl.paths.spline import PathError, dedupe_knots, resample_by_distance, sample_uniform
 from pathrl.robot.model import RobotSpec, load_robot
 
 KINDS = ("random", "target_point", "ball_balancing")
 SPLIT_IDS = {"train": 0, "test": 1}
 
 _COMMON = {
-    "chunk_size": 10,  # paths per chunk (unit of seeding and of parallel work)
-    "batch_size": 16,  # candidate trajectories simulated together
+    "chunk_size": 25,  # paths per chunk (unit of seeding and of parallel work)
+    "batch_size": 64,  # at most this many candidate trajectories simulated together
     "dt": 0.1,  # decision step (s)
     "substeps": 4,  # recorded (and collision-checked) samples per decision step
     "max_duration": 60.0,  # longest simulated motion per candidate (s)
     "max_rewinds": 20,
     "knot_spacing": 0.1,  # stored knots: distance resampling (rad)
+    "limit_margin": 0.02,  # motions stay this far inside the position limits (room for spline overshoot)
+    "check_spacing": 0.05,  # final check of the stored path: collisions every 0.05 rad (limits every 0.01)
 }
 
 DEFAULT_PARAMS: dict[str, dict[str, Any]] = {
     "random": {
         **_COMMON,
-        "length_range": {"iiwa7": [19.5, 26.0], "armar6": [21.6, 25.5], "armar4": [18.0, 22.9],
-                         "default": [19.5, 26.0]},
+        "length_range": {
+            "iiwa7": [19.5, 26.0],
+            "armar6": [21.6, 25.5],
+            "armar4": [18.0, 22.9],
+            "default": [19.5, 26.0],
+        },
         "action_smoothing": 0.0,
         "checkpoint_steps": 5,
+        "oversample": 1.4,  # candidates per missing path (~25 % are dropped after repeated collisions)
         "default_knots": {"strategy": "curvature", "spacing": 0.3, "base_spacing": 0.1},
     },
     "target_point": {
         **_COMMON,
         "length_range": {"iiwa7": [22.0, 28.9], "armar4": [23.7, 29.4], "default": [22.0, 28.9]},
+        "oversample": 1.1,
         "gain": 3.0,
         "action_noise": 0.1,
         "goal_tolerance": 0.4,
@@ -118,7 +137,7 @@ DEFAULT_PARAMS: dict[str, dict[str, Any]] = {
         "length_range": [3.2, 5.1],
         "length_beta": [1.5, 3.5],
         "waypoint_step": [0.8, 1.6],
-        "waypoint_turn": 1.0,
+        "waypoint_turn": 0.6,
         "q7_max": 0.006,
         "check_spacing": 0.05,
         "knot_spacing": 0.3,
@@ -173,9 +192,21 @@ class _Context:
         self.fk = ForwardKinematics(self.spec)
         self.checker = CollisionChecker(self.spec)
         self._limits = None
-        self.lo = torch.as_tensor(self.spec.pos_limits[:, 0])
-        self.hi = torch.as_tensor(self.spec.pos_limits[:, 1])
+        self.set_margin(0.0)
         self.pidx = torch.as_tensor(self.spec.path_index)
+
+    def set_margin(self, margin: float) -> None:
+        """Generate motions within the position limits shrunk by `margin` (rad or m) on each side."""
+        if getattr(self, "margin", None) == margin:
+            return
+        self.margin = float(margin)
+        lim = self.spec.pos_limits + np.array([margin, -margin])
+        if np.any(lim[:, 0] >= lim[:, 1]):
+            raise GenerationError(f"limit_margin {margin} leaves an empty position range")
+        self.gen_limits = lim
+        self.lo = torch.as_tensor(lim[:, 0])
+        self.hi = torch.as_tensor(lim[:, 1])
+        self._limits = None
 
     def reachable_grid(self, n: int = 20_000, voxel: float = 0.05) -> tuple[np.ndarray, float]:
         """Occupancy (T, nx, ny, nz) of the workspace box by each TCP over n random configurations."""
@@ -217,9 +248,11 @@ class _Context:
     @property
     def limits(self):
         if self._limits is None:
+            from dataclasses import replace
+
             from pathrl.limits.feasible import JointLimits
 
-            self._limits = JointLimits.from_robot(self.spec)
+            self._limits = JointLimits.from_robot(replace(self.spec, pos_limits=self.gen_limits))
         return self._limits
 
     def in_collision(self, q: np.ndarray | torch.Tensor) -> np.ndarray:
@@ -262,7 +295,7 @@ def _rngs(seed: int, split_id: int, chunk: int) -> tuple[np.random.Generator, to
 
 def sample_starts(ctx: _Context, rng: np.random.Generator, n: int, max_draws: int = 200_000) -> np.ndarray:
     """n configurations uniform in the position limits, collision free, every TCP in the workspace box."""
-    lo, hi = ctx.spec.pos_limits[:, 0], ctx.spec.pos_limits[:, 1]
+    lo, hi = ctx.gen_limits[:, 0], ctx.gen_limits[:, 1]
     out: list[np.ndarray] = []
     drawn = 0
     while len(out) < n:
@@ -328,7 +361,9 @@ def solve_ik(
     if active.any():
         idx = active.nonzero().squeeze(1)
         x0 = ctx.fk.tcp_positions(q[idx]).reshape(len(idx), -1)
-        err_norm[idx] = (targets[idx].reshape(len(idx), -1) - x0).reshape(len(idx), -1, 3).norm(dim=-1).max(1).values
+        err_norm[idx] = (
+            (targets[idx].reshape(len(idx), -1) - x0).reshape(len(idx), -1, 3).norm(dim=-1).max(1).values
+        )
     return q, err_norm < tolerance
 
 
@@ -416,7 +451,9 @@ class _TargetPolicy:
 
     def _refill(self, rows: torch.Tensor, q_from: torch.Tensor) -> None:
         """Append ``goal_batch`` chained goals (each from the previous one) to the queues of `rows`."""
-        last = torch.stack([self.queue[r][-1] if self.queue[r] else q_from[i] for i, r in enumerate(rows.tolist())])
+        last = torch.stack(
+            [self.queue[r][-1] if self.queue[r] else q_from[i] for i, r in enumerate(rows.tolist())]
+        )
         for _ in range(int(self.p["goal_batch"])):
             last, failed = self.solve_goals(last)
             for i, r in enumerate(rows.tolist()):
@@ -523,21 +560,32 @@ def rollout_paths(
     cap = max_steps * n_sub + 1
     out: list[np.ndarray] = []
     while len(out) < n_paths:
-        b = int(p["batch_size"])
+        # enough candidates for the missing paths (some get dropped), at most batch_size
+        b = min(int(p["batch_size"]), math.ceil(float(p["oversample"]) * (n_paths - len(out))) + 1)
         q0 = torch.as_tensor(sample_starts(ctx, rng, b))
         target = torch.as_tensor(rng.uniform(lo_len, hi_len, size=b))
         if kind == "random":
             pol: Any = _RandomPolicy(ctx, p, b, tgen)
         else:
             pol = _TargetPolicy(ctx, p, b, rng, tgen)
-        pos, vel, acc = q0.clone(), torch.zeros(b, d, dtype=torch.float64), torch.zeros(b, d, dtype=torch.float64)
+        pos, vel, acc = (
+            q0.clone(),
+            torch.zeros(b, d, dtype=torch.float64),
+            torch.zeros(b, d, dtype=torch.float64),
+        )
         rec = torch.zeros(b, cap, m, dtype=torch.float64)
         s = torch.zeros(b, cap, dtype=torch.float64)
         rec[:, 0] = q0[:, ctx.pidx]
         n_rec = torch.ones(b, dtype=torch.long)
         steps = torch.zeros(b, dtype=torch.long)
         rewinds = torch.zeros(b, dtype=torch.long)
-        ck = {"pos": pos.clone(), "vel": vel.clone(), "acc": acc.clone(), "n": n_rec.clone(), "steps": steps.clone()}
+        ck = {
+            "pos": pos.clone(),
+            "vel": vel.clone(),
+            "acc": acc.clone(),
+            "n": n_rec.clone(),
+            "steps": steps.clone(),
+        }
         active = ~pol.reset(q0)
         done = torch.zeros(b, dtype=torch.bool)
         stats["candidates"] = stats.get("candidates", 0) + b
@@ -582,7 +630,13 @@ def rollout_paths(
                     rej = rej | timeout
                     active[r2[rej]] = False
                     c = r2[ckm & ~rej]
-                    for key, val in (("pos", pos), ("vel", vel), ("acc", acc), ("n", n_rec), ("steps", steps)):
+                    for key, val in (
+                        ("pos", pos),
+                        ("vel", vel),
+                        ("acc", acc),
+                        ("n", n_rec),
+                        ("steps", steps),
+                    ):
                         ck[key][c] = val[c]
                     rewinds[c] = 0
             if coll.any():
@@ -620,12 +674,17 @@ def _ball_full(red: np.ndarray) -> np.ndarray:
 
 
 def ball_constraint_violation(q: np.ndarray) -> np.ndarray:
-    """Per sample: max(|q3|, |q5|, |q6 - (q4 - q2)|, max(|q7| - 0.009, 0)) for iiwa configurations (..., 7)."""
+    """Per sample (..., 7): max(|q3|, |q5|, |q6 - (q4 - q2)|, max(|q7| - 0.009, 0))."""
     q = np.asarray(q)
     return np.max(
         np.stack(
-            [np.abs(q[..., 2]), np.abs(q[..., 4]), np.abs(q[..., 5] - (q[..., 3] - q[..., 1])),
-             np.maximum(np.abs(q[..., 6]) - 0.009, 0.0)], axis=-1
+            [
+                np.abs(q[..., 2]),
+                np.abs(q[..., 4]),
+                np.abs(q[..., 5] - (q[..., 3] - q[..., 1])),
+                np.maximum(np.abs(q[..., 6]) - 0.009, 0.0),
+            ],
+            axis=-1,
         ),
         axis=-1,
     )
@@ -647,9 +706,14 @@ def _ball_point_ok(ctx: _Context, red: np.ndarray) -> bool:
     return bool(ctx.in_workspace(q[None])[0]) and not bool(ctx.in_collision(q[None])[0])
 
 
-def ball_paths(ctx: _Context, p: Mapping[str, Any], n_paths: int, rng: np.random.Generator,
-               stats: dict[str, int] | None = None) -> list[np.ndarray]:
-    """Plate-horizontal iiwa paths: spline through valid random waypoints in (q1, q2, q4, q7), cut, checked."""
+def ball_paths(
+    ctx: _Context,
+    p: Mapping[str, Any],
+    n_paths: int,
+    rng: np.random.Generator,
+    stats: dict[str, int] | None = None,
+) -> list[np.ndarray]:
+    """Plate-horizontal iiwa paths: spline through valid random (q1, q2, q4, q7) waypoints, cut, checked."""
     check_ball_robot(ctx.spec)
     stats = stats if stats is not None else {}
     lim = ctx.spec.pos_limits
@@ -663,13 +727,21 @@ def ball_paths(ctx: _Context, p: Mapping[str, Any], n_paths: int, rng: np.random
     while len(out) < n_paths:
         tries += 1
         if tries > int(p["max_tries"]) * max(n_paths, 1):
-            raise GenerationError(f"ball_balancing: only {len(out)} of {n_paths} valid paths in {tries} tries")
+            raise GenerationError(
+                f"ball_balancing: only {len(out)} of {n_paths} valid paths in {tries} tries"
+            )
         stats["candidates"] = stats.get("candidates", 0) + 1
         length = lo + (hi - lo) * rng.beta(a_beta, b_beta)
         # start: uniform in (q1, q2, q4) with q6 = q4 - q2 in limits, plate in the workspace, collision free
         for _ in range(10_000):
-            red = np.array([rng.uniform(*lim[0]), rng.uniform(*lim[1]), rng.uniform(*lim[3]),
-                            rng.uniform(-q7_max, q7_max)])
+            red = np.array(
+                [
+                    rng.uniform(*lim[0]),
+                    rng.uniform(*lim[1]),
+                    rng.uniform(*lim[3]),
+                    rng.uniform(-q7_max, q7_max),
+                ]
+            )
             if _ball_point_ok(ctx, red):
                 break
         else:
@@ -703,8 +775,11 @@ def ball_paths(ctx: _Context, p: Mapping[str, Any], n_paths: int, rng: np.random
         path = _cut(dense, cum, length)
         try:
             stored = resample_by_distance(path, float(p["knot_spacing"]))
-            check, _ = sample_uniform(stored, float(p["check_spacing"]))
+            check, stored_length = sample_uniform(stored, float(p["check_spacing"]))
         except PathError:
+            continue
+        if not lo <= stored_length <= hi:  # sharp turns cut short by the knot spacing
+            stats["rejected_length"] = stats.get("rejected_length", 0) + 1
             continue
         stats["checks"] = stats.get("checks", 0) + len(check)
         if not _ball_valid(ctx, check):
@@ -730,13 +805,30 @@ def _ball_valid(ctx: _Context, q: np.ndarray) -> bool:
 # chunks and datasets
 
 
+def path_valid(ctx: _Context, knots: np.ndarray, spacing: float) -> bool:
+    """The stored path (spline through `knots`) within the position limits (dense samples, 0.01 rad)
+    and collision free (samples every `spacing` rad)."""
+    lim = ctx.spec.pos_limits
+    q, _ = sample_uniform(knots, 0.01)
+    if np.any(q < lim[:, 0]) or np.any(q > lim[:, 1]):
+        return False
+    qc, _ = sample_uniform(knots, spacing)
+    return not np.any(ctx.in_collision(qc))
+
+
 def _path_metrics(knots_list: Sequence[np.ndarray]) -> np.ndarray:
     counts, lengths, gaps = path_lengths_and_gaps(knots_list)
     return np.stack([counts, lengths, gaps], axis=1) if len(counts) else np.zeros((0, 3))
 
 
 def generate_chunk(
-    robot_cfg: Mapping[str, Any], kind: str, params: Mapping[str, Any], seed: int, split_id: int, chunk: int, n: int
+    robot_cfg: Mapping[str, Any],
+    kind: str,
+    params: Mapping[str, Any],
+    seed: int,
+    split_id: int,
+    chunk: int,
+    n: int,
 ) -> dict[str, Any]:
     """Generate one chunk: stored knots, knots under the default strategy and per-path metrics of both."""
     ctx = _context(robot_cfg)
@@ -746,8 +838,16 @@ def generate_chunk(
     if kind == "ball_balancing":
         stored = ball_paths(ctx, params, n, rng, stats)
     else:
-        polys = rollout_paths(ctx, kind, params, n, rng, tgen, stats)
-        stored = [resample_by_distance(dedupe_knots(pl), float(params["knot_spacing"])) for pl in polys]
+        ctx.set_margin(float(params["limit_margin"]))
+        stored = []
+        while len(stored) < n:
+            polys = rollout_paths(ctx, kind, params, n - len(stored), rng, tgen, stats)
+            for pl in polys:
+                k = resample_by_distance(dedupe_knots(pl), float(params["knot_spacing"]))
+                if path_valid(ctx, k, float(params["check_spacing"])):
+                    stored.append(k)
+                else:
+                    stats["rejected_final"] = stats.get("rejected_final", 0) + 1
     strategy = KnotStrategy.from_cfg(params["default_knots"])
     resampled = [strategy.apply(k) for k in stored]
     return {
@@ -780,14 +880,31 @@ class _Job:
 
 
 def _run_jobs(
-    jobs: list[_Job], fn: Callable[[_Job], dict[str, Any]], workers: int, progress: bool, label: str, total: int
+    jobs: list[_Job],
+    fn: Callable[[_Job], dict[str, Any]],
+    workers: int,
+    progress: bool,
+    label: str,
+    total: int,
 ) -> list[dict[str, Any]]:
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )
 
     results: list[dict[str, Any] | None] = [None] * len(jobs)
     with Progress(
-        TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-        TimeRemainingColumn(), disable=not progress, transient=False,
+        TextColumn("[bold]{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        TimeRemainingColumn(),
+        disable=not progress,
+        transient=False,
     ) as bar:
         task = bar.add_task(label, total=total)
         if workers <= 1 or len(jobs) <= 1:
@@ -816,7 +933,9 @@ class _ChunkFn:
     seed: int
 
     def __call__(self, job: _Job) -> dict[str, Any]:
-        return generate_chunk(self.robot_cfg, self.kind, self.params, self.seed, SPLIT_IDS[job.split], job.chunk, job.n)
+        return generate_chunk(
+            self.robot_cfg, self.kind, self.params, self.seed, SPLIT_IDS[job.split], job.chunk, job.n
+        )
 
 
 def generate_dataset(
@@ -840,6 +959,11 @@ def generate_dataset(
         raise DatasetError(f"dataset.kind: unknown generator {kind!r}; choose one of {list(KINDS)}")
     if kind == "ball_balancing":
         check_ball_robot(spec)
+    if spec.dof != spec.path_dof:
+        raise DatasetError(
+            f"robot {spec.name!r} controls joints outside the path; generate with a robot whose joints are "
+            f"all path joints (e.g. armar4 for armar4_legs: the datasets share path_joints)"
+        )
     params = resolve_params(kind, spec.name, dataset_cfg.get("params"))
     seed = int(dataset_cfg.get("seed", 0))
     counts = {"train": int(dataset_cfg.get("num_train", 0)), "test": int(dataset_cfg.get("num_test", 0))}
@@ -889,12 +1013,22 @@ def generate_dataset(
         "kind": kind,
         "path_joints": list(spec.path_joints),
         "seed": seed,
-        "generator": {"name": str(dataset_cfg.get("name", kind)), "kind": kind, "params": params,
-                      "num_train": counts["train"], "num_test": counts["test"], "robot_config": robot_cfg},
+        "generator": {
+            "name": str(dataset_cfg.get("name", kind)),
+            "kind": kind,
+            "params": params,
+            "num_train": counts["train"],
+            "num_test": counts["test"],
+            "robot_config": robot_cfg,
+        },
         "source": "generated",
         "default_knots": dict(params["default_knots"]),
-        "generation": {"seconds": round(elapsed, 2), "worker_seconds": round(cpu, 2), "workers": workers,
-                       **gen_stats},
+        "generation": {
+            "seconds": round(elapsed, 2),
+            "worker_seconds": round(cpu, 2),
+            "workers": workers,
+            **gen_stats,
+        },
     }
     ds = save_dataset(dest, splits, meta, overwrite=overwrite, stats=stats)
     for split in splits:

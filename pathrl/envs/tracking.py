@@ -31,7 +31,7 @@ from tensordict import TensorDict
 from torch import Tensor
 
 from pathrl.envs.rewards import RewardTerm, StepQuantities
-from pathrl.limits.braking import braking_acceleration, is_stopped
+from pathrl.limits.braking import braking_within, is_stopped
 from pathrl.limits.feasible import JointLimits, action_to_acceleration, valid_acceleration_range
 from pathrl.limits.integrate import end_of_step, interpolate_step
 from pathrl.paths.pathset import PathSet
@@ -228,7 +228,7 @@ class PathTrackingEnv(_VecEnvBase):
         action_absmax = actions.abs().amax(dim=1)
         a1 = action_to_acceleration(actions.clamp(-1.0, 1.0), self.a_min, self.a_max)
         if bool(self.braking.any()):
-            brake = braking_acceleration(self.pos, self.vel, self.acc, self.limits, cfg.dt)
+            brake = braking_within(self.vel, self.acc, self.a_min, self.a_max, cfg.dt, cfg.stop_tolerance)
             a1 = torch.where(self.braking.unsqueeze(1), brake, a1)
 
         # 2. integrate: intermediate positions (path joints) and the end state

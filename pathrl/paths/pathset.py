@@ -73,12 +73,14 @@ class PathSet:
         x = (s2 / self.table_step).clamp(min=0.0)
         last = ((self.length[idx] / self.table_step)).to(self.table.dtype).unsqueeze(1)
         x = torch.minimum(x, last)
-        i0 = x.floor().long().clamp(max=self.table.shape[1] - 2)
+        n_s = self.table.shape[1]
+        i0 = x.floor().long().clamp(max=n_s - 2)
         w = (x - i0).unsqueeze(-1)
-        rows = self.table[idx]  # (N, S, M)
-        m = rows.shape[-1]
-        p0 = torch.gather(rows, 1, i0.unsqueeze(-1).expand(-1, -1, m))
-        p1 = torch.gather(rows, 1, (i0 + 1).unsqueeze(-1).expand(-1, -1, m))
+        m = self.table.shape[-1]
+        flat = self.table.reshape(-1, m)
+        base = ((idx * n_s).unsqueeze(1) + i0).reshape(-1)  # rows of the flattened table
+        p0 = flat.index_select(0, base).view(*i0.shape, m)
+        p1 = flat.index_select(0, base + 1).view(*i0.shape, m)
         return (p0 + w * (p1 - p0)).reshape(*shape, m)
 
     def knot_index_at(self, idx: Tensor, s: Tensor) -> Tensor:

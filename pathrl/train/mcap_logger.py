@@ -40,6 +40,9 @@ class McapLogWriter(LogWriter):
             self.writer.flush()
 
     def add_scalar(self, tag: str, scalar_value: float, global_step: int) -> None:
+        if tag.endswith("/time"):  # RSL-RL logs these against elapsed seconds, not the iteration
+            self._values[tag] = float(scalar_value)
+            return
         if self._step is not None and global_step != self._step:
             self._emit()
         self._step = int(global_step)

@@ -14,10 +14,11 @@ Episodes recording (one recording per file, application id ``pathrl``), two time
 Entities::
 
     /world                                 right-handed, z up (the URDF root link frame)
-    /world/<urdf robot name>/...           URDF geometry (rr.urdf.UrdfTree), static; frames = link names
-    /world/joint_transforms                joint transforms (send_columns of compute_transform_columns)
+    /world/<urdf robot name>/...           URDF visual geometry (rr.urdf.UrdfTree), static; frames = links
+    /world/fixed_transforms/<joint>        fixed joints (static)
+    /world/joint_transforms                movable joints (send_columns of compute_transform_columns)
     /world/reference                       reference TCP path(s), green line strips, per episode
-    /world/executed                        executed TCP path(s), red, growing with time (complete on `episode`)
+    /world/executed                        executed TCP path(s), red, growing (complete on `episode`)
     /world/tcp, /world/reference_point     executed TCP now / reference at equal arc length (points)
     /world/<extra>                         points of optional channels such as /eval/ball, /eval/pelvis
     /joints/<joint>/<quantity>             position, velocity, acceleration, jerk (scalars)
@@ -27,9 +28,13 @@ Entities::
     /deviation/cartesian_cm/<tcp link>     |tcp - tcp_ref(s_exec)| in cm
     /metrics/episode                       markdown table of the current episode's metrics
     /metrics/summary                       markdown table of all selected episodes (static)
+    /metrics/source                        input file and selection (static)
     /episode_metrics/<key>                 numeric episode metrics on the `episode` timeline
 
-Run recording: ``/training/<tag>`` scalars on the ``iteration`` timeline, ``/training/config`` (static text).
+Run recording: ``/training/<tag>`` scalars on the ``iteration`` timeline (RSL-RL's ``.../time`` tags on
+``train_time``, seconds), ``/training/config`` (static markdown of the config message).
+
+Both recordings carry a default blueprint (layout); the viewer opens at the end of the timeline.
 """
 
 from __future__ import annotations
@@ -42,8 +47,8 @@ import subprocess
 import sys
 import tempfile
 import time
-import warnings
 from collections.abc import Iterable, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -61,6 +66,7 @@ ACTIVE_TAB = 0
 QUANTITIES = ("position", "velocity", "acceleration", "jerk")
 UNITS = {"position": "rad", "velocity": "rad/s", "acceleration": "rad/s²", "jerk": "rad/s³"}
 MOVABLE = ("revolute", "continuous", "prismatic")
+TCP_COLORS = ((230, 40, 40), (240, 110, 200), (255, 160, 40))
 GREEN, RED, GREY = (40, 190, 70), (230, 40, 40), (140, 140, 140)
 
 
@@ -89,8 +95,9 @@ def kind_of(path: Path) -> str:
     if "/train/scalars" in topics or "/run/config" in topics:
         return "run"
     found = ", ".join(sorted(topics)) or "none"
-    raise ViewError(f"{path}: no pathrl channels (need {' + '.join(EPISODE_TOPICS)} or /train/scalars); "
-                    f"found: {found}")
+    raise ViewError(
+        f"{path}: no pathrl channels (need {' + '.join(EPISODE_TOPICS)} or /train/scalars); found: {found}"
+    )
 
 
 def _topics(path: Path) -> set[str]:
@@ -156,7 +163,9 @@ def read_episodes(path: Path) -> tuple[RobotInfo, list[Episode]]:
         elif topic == "/eval/episode_metrics":
             metrics[int(msg["episode"])] = msg
         elif topic.startswith("/eval/") and isinstance(msg, dict) and "episode" in msg and "t" in msg:
-            extras.setdefault(int(msg["episode"]), {}).setdefault(topic.removeprefix("/eval/"), []).append(msg)
+            extras.setdefault(int(msg["episode"]), {}).setdefault(topic.removeprefix("/eval/"), []).append(
+                msg
+            )
     if robot is None:
         raise ViewError(f"{path}: no /eval/robot message")
     if not states:
@@ -164,14 +173,23 @@ def read_episodes(path: Path) -> tuple[RobotInfo, list[Episode]]:
     episodes = []
     for ep in sorted(states):
         rows = sorted(states[ep], key=lambda m: m["t"])
-        e = Episode(ep, np.array([m["t"] for m in rows], dtype=np.float64),
-                    *(np.array([m[k] for m in rows], dtype=np.float64) for k in ("position", "velocity",
-                                                                                   "acceleration")))
+        e = Episode(
+            ep,
+            np.array([m["t"] for m in rows], dtype=np.float64),
+            *(
+                np.array([m[k] for m in rows], dtype=np.float64)
+                for k in ("position", "velocity", "acceleration")
+            ),
+        )
         if e.q.ndim != 2 or e.q.shape[1] != len(robot.joint_names):
-            raise ViewError(f"{path}: episode {ep}: joint_state has {e.q.shape[-1]} joints, "
-                            f"robot has {len(robot.joint_names)}")
+            raise ViewError(
+                f"{path}: episode {ep}: joint_state has {e.q.shape[-1]} joints, "
+                f"robot has {len(robot.joint_names)}"
+            )
         if ep in tcps and len(tcps[ep]) == len(rows):
-            e.tcp = np.array([m["position"] for m in sorted(tcps[ep], key=lambda m: m["t"])], dtype=np.float64)
+            e.tcp = np.array(
+                [m["position"] for m in sorted(tcps[ep], key=lambda m: m["t"])], dtype=np.float64
+            )
         if ep in refs:
             r = refs[ep]
             e.ref_s = np.asarray(r["s"], dtype=np.float64)
@@ -190,29 +208,41 @@ def _robot_info(path: Path, msg: dict) -> RobotInfo:
         names = [str(j) for j in msg["joint_names"]]
         d = len(names)
         limits = {}
-        for q, key in zip(QUANTITIES, ("position_limits", "velocity_limits", "acceleration_limits",
-                                       "jerk_limits"), strict=True):
+        for q, key in zip(
+            QUANTITIES,
+            ("position_limits", "velocity_limits", "acceleration_limits", "jerk_limits"),
+            strict=True,
+        ):
             if key in msg:
                 arr = np.asarray(msg[key], dtype=np.float64)
                 if arr.shape != (d, 2):
                     raise ValueError(f"{key} has shape {arr.shape}, expected ({d}, 2)")
                 limits[q] = arr
-        return RobotInfo(str(msg.get("robot", "robot")), names, [str(j) for j in msg.get("path_joints", names)],
-                         limits, str(msg.get("urdf", "")), [str(t) for t in msg.get("tcp_links", [])])
+        return RobotInfo(
+            str(msg.get("robot", "robot")),
+            names,
+            [str(j) for j in msg.get("path_joints", names)],
+            limits,
+            str(msg.get("urdf", "")),
+            [str(t) for t in msg.get("tcp_links", [])],
+        )
     except (KeyError, TypeError, ValueError) as exc:
         raise ViewError(f"{path}: malformed /eval/robot message ({exc})") from None
 
 
-def select_episodes(episodes: list[Episode], ids: Sequence[int] | None = None,
-                    worst: int | None = None) -> list[Episode]:
+def select_episodes(
+    episodes: list[Episode], ids: Sequence[int] | None = None, worst: int | None = None
+) -> list[Episode]:
     """`ids` in the given order, or the `worst` episodes by ``cart_pos_dev_mean_cm`` (worst first), or all."""
     if ids is not None:
         by_id = {e.episode: e for e in episodes}
         missing = [i for i in ids if i not in by_id]
         if missing:
             lo, hi = min(by_id), max(by_id)
-            raise ViewError(f"episodes not in the file: {', '.join(map(str, missing))} "
-                            f"(it has {len(by_id)} episodes, ids {lo}..{hi})")
+            raise ViewError(
+                f"episodes not in the file: {', '.join(map(str, missing))} "
+                f"(it has {len(by_id)} episodes, ids {lo}..{hi})"
+            )
         return [by_id[i] for i in ids]
     if worst is not None:
         scored = [e for e in episodes if _finite(e.metrics.get("cart_pos_dev_mean_cm"))]
@@ -238,8 +268,10 @@ def read_run(path: Path) -> tuple[dict[str, Any] | None, dict[str, tuple[np.ndar
             for tag, val in (msg.get("values") or {}).items():
                 if isinstance(val, (int, float)) and not isinstance(val, bool):
                     rows.setdefault(str(tag), {})[it] = float(val)
-    curves = {tag: (np.array(sorted(d), dtype=np.int64), np.array([d[i] for i in sorted(d)], dtype=np.float64))
-              for tag, d in sorted(rows.items())}
+    curves = {
+        tag: (np.array(sorted(d), dtype=np.int64), np.array([d[i] for i in sorted(d)], dtype=np.float64))
+        for tag, d in sorted(rows.items())
+    }
     return config, curves
 
 
@@ -253,7 +285,10 @@ def jerk(a: np.ndarray, t: np.ndarray) -> np.ndarray:
 def progress_and_deviation(e: Episode, robot: RobotInfo) -> dict[str, np.ndarray]:
     """Executed joint-space arc length vs the reference at equal arc length (the metrics' definition).
 
-    Returns fraction (N,), joint_rad (N,), cartesian_cm (N, T) if TCPs are known, reference_tcp (N, T, 3).
+    Progress = executed arc length / reference arc length, capped at 1 (the reference lookup is clamped at
+    the segment end, as in :mod:`pathrl.eval.metrics`). Reference TCPs between the 200 logged samples are
+    interpolated linearly. Returns fraction (N,), joint_rad (N,), reference_tcp (N, T, 3) and cartesian_cm
+    (N, T) when the file has TCPs.
     """
     if e.ref_s is None or e.ref_q is None or len(e.ref_s) < 2:
         return {}
@@ -261,12 +296,14 @@ def progress_and_deviation(e: Episode, robot: RobotInfo) -> dict[str, np.ndarray
     s_exec = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(qp, axis=0), axis=1))])
     s0, s1 = float(e.ref_s[0]), float(e.ref_s[-1])
     s_ref = np.clip(s0 + s_exec, s0, s1)
-    out = {"fraction": s_exec / max(s1 - s0, 1e-12)}
+    out = {"fraction": np.minimum(s_exec / max(s1 - s0, 1e-12), 1.0)}
     q_ref = np.stack([np.interp(s_ref, e.ref_s, e.ref_q[:, j]) for j in range(e.ref_q.shape[1])], axis=1)
     out["joint_rad"] = np.linalg.norm(qp - q_ref, axis=1)
     if e.ref_tcp is not None and e.ref_tcp.ndim == 3:
         r = e.ref_tcp
-        tcp_ref = np.stack([[np.interp(s_ref, e.ref_s, r[:, k, c]) for c in range(3)] for k in range(r.shape[1])])
+        tcp_ref = np.stack(
+            [[np.interp(s_ref, e.ref_s, r[:, k, c]) for c in range(3)] for k in range(r.shape[1])]
+        )
         out["reference_tcp"] = tcp_ref.transpose(2, 0, 1)  # (N, T, 3)
         if e.tcp is not None and e.tcp.shape[1:] == r.shape[1:]:
             out["cartesian_cm"] = 100.0 * np.linalg.norm(e.tcp - out["reference_tcp"], axis=2)
@@ -343,15 +380,23 @@ def _send(rec, entity: str, indexes: list, columns) -> None:
     rec.send_columns(entity, indexes=indexes, columns=columns, strict=True)
 
 
+def _time_column(seconds: Any):
+    """The ``time`` index (seconds rounded to whole nanoseconds, so 4.1 s is 4_100_000_000 ns)."""
+    ns = np.round(np.asarray(seconds, dtype=np.float64) * 1e9).astype("timedelta64[ns]")
+    return _rr().TimeColumn("time", duration=ns)
+
+
 def _esc(part: str) -> str:
     return _rr().escape_entity_path_part(part)
 
 
-def episodes_to_rrd(src: Path, out: Path, ids: Sequence[int] | None = None, worst: int | None = None,
-                    timeline: str = "time") -> ConvertStats:
+def episodes_to_rrd(
+    src: Path, out: Path, ids: Sequence[int] | None = None, worst: int | None = None, timeline: str = "time"
+) -> ConvertStats:
     """Convert (a selection of) the episodes of `src` into the recording `out`.
 
-    `timeline` is the one the viewer opens on (paused): ``time`` (animation) or ``episode`` (one row each).
+    `timeline` is the one the viewer opens on, at its end: ``time`` (the episodes back to back) or
+    ``episode`` (one row per episode).
     """
     if timeline not in ("time", "episode"):
         raise ViewError(f"timeline must be time or episode, got {timeline!r}")
@@ -360,27 +405,43 @@ def episodes_to_rrd(src: Path, out: Path, ids: Sequence[int] | None = None, wors
     chosen = select_episodes(episodes, ids, worst)
     notes: list[str] = []
     rr = _rr()
-    rec = rr.RecordingStream("pathrl", recording_id=f"episodes:{src.resolve()}")
+    rec = rr.RecordingStream("pathrl")
     tmp = out.with_name(out.name + ".tmp")
     rec.save(tmp, default_blueprint=_episodes_blueprint(robot, chosen, timeline))
-    with tempfile.TemporaryDirectory(prefix="pathrl-view-") as tdir:
+    rec.send_recording_name(f"{src.parent.name}/{src.name}")
+    with _removed_on_error(tmp), tempfile.TemporaryDirectory(prefix="pathrl-view-") as tdir:
         rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
-        rec.log("metrics/source", rr.TextDocument(f"`{src}`: robot **{robot.name}**, {len(episodes)} episodes "
-                                                  f"in the file, {len(chosen)} shown", media_type="text/markdown"),
-                static=True)
+        rec.log(
+            "metrics/source",
+            rr.TextDocument(
+                f"`{src}`: robot **{robot.name}**, {len(episodes)} episodes in the file, {len(chosen)} shown",
+                media_type="text/markdown",
+            ),
+            static=True,
+        )
         starts = _episode_starts(chosen)
         tree = _log_robot(rec, robot, Path(tdir), notes)
         if tree is not None:
             _log_joint_transforms(rec, tree, robot, chosen, starts, notes)
             _anchor_to_robot_base(rec, tree.root_link().name, chosen)
-        _log_paths(rec, robot, chosen, starts)
-        _log_series(rec, robot, chosen, starts)
+        derived = [progress_and_deviation(e, robot) for e in chosen]
+        _log_paths(rec, chosen, starts, derived)
+        _log_series(rec, robot, chosen, starts, derived)
         _log_metrics(rec, chosen, starts)
         _log_extras(rec, chosen, starts)
         rec.flush()
         rec.disconnect()
     tmp.replace(out)
     return ConvertStats(out, "episodes", len(chosen), time.perf_counter() - t0, out.stat().st_size, notes)
+
+
+@contextmanager
+def _removed_on_error(path: Path):
+    try:
+        yield
+    except BaseException:
+        path.unlink(missing_ok=True)
+        raise
 
 
 def _episode_starts(episodes: list[Episode]) -> np.ndarray:
@@ -391,8 +452,8 @@ def _episode_starts(episodes: list[Episode]) -> np.ndarray:
     return np.array(starts)
 
 
-def _times(episodes: list[Episode], starts: np.ndarray, skip_first: bool = False) -> np.ndarray:
-    return np.concatenate([s + (e.t[1:] if skip_first else e.t) for e, s in zip(episodes, starts, strict=True)])
+def _times(episodes: list[Episode], starts: np.ndarray) -> np.ndarray:
+    return np.concatenate([s + e.t for e, s in zip(episodes, starts, strict=True)])
 
 
 def _log_robot(rec, robot: RobotInfo, tdir: Path, notes: list[str]):
@@ -408,27 +469,33 @@ def _log_robot(rec, robot: RobotInfo, tdir: Path, notes: list[str]):
         return None
     try:
         tree = rr.urdf.UrdfTree.from_file_path(sanitize_urdf(urdf, tdir), "world")
-        chunks = [c for c in tree.stream(include_joint_transforms=False).to_chunks()
-                  if "/collision_geometries/" not in str(c.entity_path)]
+        chunks = [
+            c
+            for c in tree.stream(include_joint_transforms=False).to_chunks()
+            if "/collision_geometries/" not in str(c.entity_path)
+        ]
     except Exception as exc:  # a URDF Rerun cannot load: show the rest
         notes.append(f"{urdf}: Rerun could not load the URDF ({str(exc).splitlines()[0]}); robot not shown")
         return None
     rec.send_chunks(chunks)
     for joint in tree.joints():  # one static entity per fixed joint (a static entity keeps one row)
         if joint.joint_type not in MOVABLE:
-            rec.log(f"world/fixed_transforms/{_esc(joint.name)}", joint.compute_transform(0.0, clamp=False),
-                    static=True)
+            rec.log(
+                f"world/fixed_transforms/{_esc(joint.name)}",
+                joint.compute_transform(0.0, clamp=False),
+                static=True,
+            )
     return tree
 
 
-def _log_joint_transforms(rec, tree, robot: RobotInfo, episodes: list[Episode], starts: np.ndarray,
-                          notes: list[str]) -> None:
+def _log_joint_transforms(
+    rec, tree, robot: RobotInfo, episodes: list[Episode], starts: np.ndarray, notes: list[str]
+) -> None:
     """All movable joints: the logged ones per step, the others (e.g. fingers) at 0 from the first instant."""
     rr = _rr()
-    time_idx = [rr.TimeColumn("time", duration=_times(episodes, starts))]
+    time_idx = [_time_column(_times(episodes, starts))]
     ends = np.array([s + e.t[-1] for e, s in zip(episodes, starts, strict=True)])
-    ep_idx = [rr.TimeColumn("time", duration=ends),
-              rr.TimeColumn("episode", sequence=[e.episode for e in episodes])]
+    ep_idx = [_time_column(ends), rr.TimeColumn("episode", sequence=[e.episode for e in episodes])]
     q_all = np.concatenate([e.q for e in episodes])
     q_final = np.array([e.q[-1] for e in episodes])
     col = {name: j for j, name in enumerate(robot.joint_names)}
@@ -437,14 +504,28 @@ def _log_joint_transforms(rec, tree, robot: RobotInfo, episodes: list[Episode], 
             continue
         if joint.name in col:
             j = col[joint.name]
-            _send(rec, "world/joint_transforms", time_idx,
-                  joint.compute_transform_columns(q_all[:, j], clamp=False))
-            _send(rec, "world/joint_transforms", ep_idx,
-                  joint.compute_transform_columns(q_final[:, j], clamp=False))
+            _send(
+                rec,
+                "world/joint_transforms",
+                time_idx,
+                joint.compute_transform_columns(q_all[:, j], clamp=False),
+            )
+            _send(
+                rec,
+                "world/joint_transforms",
+                ep_idx,
+                joint.compute_transform_columns(q_final[:, j], clamp=False),
+            )
         else:
-            _send(rec, "world/joint_transforms", [rr.TimeColumn("time", duration=[starts[0] + episodes[0].t[0]]),
-                                                  rr.TimeColumn("episode", sequence=[episodes[0].episode])],
-                  joint.compute_transform_columns([0.0], clamp=False))
+            _send(
+                rec,
+                "world/joint_transforms",
+                [
+                    _time_column([starts[0] + episodes[0].t[0]]),
+                    rr.TimeColumn("episode", sequence=[episodes[0].episode]),
+                ],
+                joint.compute_transform_columns([0.0], clamp=False),
+            )
     missing = [n for n in robot.joint_names if tree.get_joint_by_name(n) is None]
     if missing:
         notes.append(f"joints not in the URDF (not animated): {', '.join(missing)}")
@@ -454,8 +535,14 @@ def _anchor_to_robot_base(rec, root_frame: str, episodes: list[Episode]) -> None
     """Put /world and the path entities in the URDF root link frame (the frame of all logged positions)."""
     rr = _rr()
     extras = sorted({n for e in episodes for n in e.extras})
-    for ent in ["world", "world/reference", "world/executed", "world/tcp", "world/reference_point",
-                *(f"world/{_esc(n)}" for n in extras)]:
+    for ent in [
+        "world",
+        "world/reference",
+        "world/executed",
+        "world/tcp",
+        "world/reference_point",
+        *(f"world/{_esc(n)}" for n in extras),
+    ]:
         rec.log(ent, rr.CoordinateFrame(root_frame), static=True)
 
 
@@ -465,7 +552,9 @@ def _strip_columns(strips: list[np.ndarray], per_row: int, **kw):
     return cols.partition([per_row] * (len(strips) // per_row)) if per_row != 1 else cols
 
 
-def _log_paths(rec, robot: RobotInfo, episodes: list[Episode], starts: np.ndarray) -> None:
+def _log_paths(
+    rec, episodes: list[Episode], starts: np.ndarray, derived: list[dict[str, np.ndarray]]
+) -> None:
     rr = _rr()
     rec.log("world/reference", rr.LineStrips3D.from_fields(colors=[GREEN], radii=0.006), static=True)
     rec.log("world/executed", rr.LineStrips3D.from_fields(colors=[RED], radii=0.006), static=True)
@@ -475,10 +564,15 @@ def _log_paths(rec, robot: RobotInfo, episodes: list[Episode], starts: np.ndarra
     if with_ref:
         n_tcp = with_ref[0][0].ref_tcp.shape[1]
         strips = [e.ref_tcp[:, k] for e, _ in with_ref for k in range(n_tcp)]
-        _send(rec, "world/reference",
-              [rr.TimeColumn("time", duration=[s + e.t[0] for e, s in with_ref]),
-               rr.TimeColumn("episode", sequence=[e.episode for e, _ in with_ref])],
-              _strip_columns(strips, n_tcp))
+        _send(
+            rec,
+            "world/reference",
+            [
+                _time_column([s + e.t[0] for e, s in with_ref]),
+                rr.TimeColumn("episode", sequence=[e.episode for e, _ in with_ref]),
+            ],
+            _strip_columns(strips, n_tcp),
+        )
     with_tcp = [(e, s) for e, s in zip(episodes, starts, strict=True) if e.tcp is not None]
     if not with_tcp:
         return
@@ -486,31 +580,47 @@ def _log_paths(rec, robot: RobotInfo, episodes: list[Episode], starts: np.ndarra
     # growing trail on `time`: row k holds tcp[: k + 1] (a single point is drawn as nothing)
     trail = [e.tcp[: max(k + 1, 2)][:, i] for e, _ in with_tcp for k in range(len(e.t)) for i in range(n_tcp)]
     times = np.concatenate([s + e.t for e, s in with_tcp])
-    _send(rec, "world/executed", [rr.TimeColumn("time", duration=times)], _strip_columns(trail, n_tcp))
+    _send(rec, "world/executed", [_time_column(times)], _strip_columns(trail, n_tcp))
     full = [e.tcp[:, i] for e, _ in with_tcp for i in range(n_tcp)]
-    _send(rec, "world/executed",
-          [rr.TimeColumn("time", duration=[s + e.t[-1] for e, s in with_tcp]),
-           rr.TimeColumn("episode", sequence=[e.episode for e, _ in with_tcp])],
-          _strip_columns(full, n_tcp))
+    _send(
+        rec,
+        "world/executed",
+        [
+            _time_column([s + e.t[-1] for e, s in with_tcp]),
+            rr.TimeColumn("episode", sequence=[e.episode for e, _ in with_tcp]),
+        ],
+        _strip_columns(full, n_tcp),
+    )
     pts = np.concatenate([e.tcp for e, _ in with_tcp])
-    _send(rec, "world/tcp", [rr.TimeColumn("time", duration=times)],
-          rr.Points3D.columns(positions=pts.reshape(-1, 3)).partition([n_tcp] * len(pts)))
-    derived = [(e, s, progress_and_deviation(e, robot)) for e, s in with_tcp]
-    derived = [(e, s, d) for e, s, d in derived if "reference_tcp" in d]
-    if derived:
-        ref_pts = np.concatenate([d["reference_tcp"] for _, _, d in derived])
-        _send(rec, "world/reference_point",
-              [rr.TimeColumn("time", duration=np.concatenate([s + e.t for e, s, _ in derived]))],
-              rr.Points3D.columns(positions=ref_pts.reshape(-1, 3)).partition([ref_pts.shape[1]] * len(ref_pts)))
+    _send(
+        rec,
+        "world/tcp",
+        [_time_column(times)],
+        rr.Points3D.columns(positions=pts.reshape(-1, 3)).partition([n_tcp] * len(pts)),
+    )
+    with_ref_pt = [
+        (e, s, d) for e, s, d in zip(episodes, starts, derived, strict=True) if "reference_tcp" in d
+    ]
+    if with_ref_pt:
+        ref_pts = np.concatenate([d["reference_tcp"] for _, _, d in with_ref_pt])
+        _send(
+            rec,
+            "world/reference_point",
+            [_time_column(np.concatenate([s + e.t for e, s, _ in with_ref_pt]))],
+            rr.Points3D.columns(positions=ref_pts.reshape(-1, 3)).partition(
+                [ref_pts.shape[1]] * len(ref_pts)
+            ),
+        )
 
 
 def _scalar_series(rec, entity: str, times: np.ndarray, values: np.ndarray) -> None:
     rr = _rr()
-    _send(rec, entity, [rr.TimeColumn("time", duration=times)], rr.Scalars.columns(scalars=values))
+    _send(rec, entity, [_time_column(times)], rr.Scalars.columns(scalars=values))
 
 
-def _with_gaps(episodes: list[Episode], starts: np.ndarray, per_episode: list[np.ndarray],
-               times: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+def _with_gaps(
+    episodes: list[Episode], starts: np.ndarray, per_episode: list[np.ndarray], times: list[np.ndarray]
+) -> tuple[np.ndarray, np.ndarray]:
     """Concatenate per-episode series with a NaN row in each gap (the plot line breaks between episodes)."""
     ts, vs = [], []
     for i, (e, s, v, t) in enumerate(zip(episodes, starts, per_episode, times, strict=True)):
@@ -522,7 +632,9 @@ def _with_gaps(episodes: list[Episode], starts: np.ndarray, per_episode: list[np
     return np.concatenate(ts), np.concatenate(vs)
 
 
-def _log_series(rec, robot: RobotInfo, episodes: list[Episode], starts: np.ndarray) -> None:
+def _log_series(
+    rec, robot: RobotInfo, episodes: list[Episode], starts: np.ndarray, derived: list[dict[str, np.ndarray]]
+) -> None:
     rr = _rr()
     t_end = float(starts[-1] + episodes[-1].t[-1])
     t_begin = float(starts[0] + episodes[0].t[0])
@@ -538,34 +650,55 @@ def _log_series(rec, robot: RobotInfo, episodes: list[Episode], starts: np.ndarr
         t_cat, v_cat = _with_gaps(episodes, starts, data[q], times[q])
         for j, name in enumerate(robot.joint_names):
             ent = f"joints/{_esc(name)}/{q}"
-            rec.log(ent, rr.SeriesLines(names=f"{name} {q} [{UNITS[q]}]", colors=[(50, 120, 220)], widths=1.5),
-                    static=True)
+            rec.log(
+                ent,
+                rr.SeriesLines(names=f"{name} {q} [{UNITS[q]}]", colors=[(50, 120, 220)], widths=1.5),
+                static=True,
+            )
             _scalar_series(rec, ent, t_cat, v_cat[:, j])
             if q in robot.limits:
-                rec.log(f"{ent}/limits", rr.SeriesLines(names=["lower limit", "upper limit"], colors=[GREY, GREY],
-                                                        widths=1.0), static=True)
+                rec.log(
+                    f"{ent}/limits",
+                    rr.SeriesLines(names=["lower limit", "upper limit"], colors=[GREY, GREY], widths=1.0),
+                    static=True,
+                )
                 lim = robot.limits[q][j]
-                _send(rec, f"{ent}/limits", [rr.TimeColumn("time", duration=[t_begin, t_end])],
-                      rr.Scalars.columns(scalars=np.array([lim, lim])))
-    derived = [progress_and_deviation(e, robot) for e in episodes]
+                _send(
+                    rec,
+                    f"{ent}/limits",
+                    [_time_column([t_begin, t_end])],
+                    rr.Scalars.columns(scalars=np.array([lim, lim])),
+                )
     have = [(e, s, d) for e, s, d in zip(episodes, starts, derived, strict=True) if d]
     if not have:
         return
     eps, sts, ds = [h[0] for h in have], np.array([h[1] for h in have]), [h[2] for h in have]
     tt = [s + e.t for e, s in zip(eps, sts, strict=True)]
-    rec.log("progress/fraction", rr.SeriesLines(names="path progress (arc length fraction)", colors=[GREEN]),
-            static=True)
+    rec.log(
+        "progress/fraction",
+        rr.SeriesLines(names="path progress (arc length fraction)", colors=[GREEN]),
+        static=True,
+    )
     _scalar_series(rec, "progress/fraction", *_with_gaps(eps, sts, [d["fraction"] for d in ds], tt))
-    rec.log("deviation/joint_rad", rr.SeriesLines(names="joint deviation [rad]", colors=[(200, 120, 30)]),
-            static=True)
+    rec.log(
+        "deviation/joint_rad",
+        rr.SeriesLines(names="joint deviation [rad]", colors=[(200, 120, 30)]),
+        static=True,
+    )
     _scalar_series(rec, "deviation/joint_rad", *_with_gaps(eps, sts, [d["joint_rad"] for d in ds], tt))
     if all("cartesian_cm" in d for d in ds):
         t_cat, v_cat = _with_gaps(eps, sts, [d["cartesian_cm"] for d in ds], tt)
         links = robot.tcp_links or [f"tcp{k}" for k in range(v_cat.shape[1])]
         for k in range(v_cat.shape[1]):
             ent = f"deviation/cartesian_cm/{_esc(links[k] if k < len(links) else f'tcp{k}')}"
-            rec.log(ent, rr.SeriesLines(names=f"TCP deviation {links[k] if k < len(links) else k} [cm]",
-                                        colors=[RED]), static=True)
+            rec.log(
+                ent,
+                rr.SeriesLines(
+                    names=f"TCP deviation {links[k] if k < len(links) else k} [cm]",
+                    colors=[TCP_COLORS[k % len(TCP_COLORS)]],
+                ),
+                static=True,
+            )
             _scalar_series(rec, ent, t_cat, v_cat[:, k])
 
 
@@ -584,8 +717,14 @@ def metrics_markdown(e: Episode, start: float) -> str:
     return "\n".join([head, "", "| metric | value |", "|---|---|", *[f"| {k} | {v} |" for k, v in rows]])
 
 
-SUMMARY_COLS = ("duration_s", "termination", "cart_pos_dev_mean_cm", "cart_pos_dev_max_cm", "joint_dev_mean_rad",
-                "limit_violations")
+SUMMARY_COLS = (
+    "duration_s",
+    "termination",
+    "cart_pos_dev_mean_cm",
+    "cart_pos_dev_max_cm",
+    "joint_dev_mean_rad",
+    "limit_violations",
+)
 
 
 def summary_markdown(episodes: list[Episode], starts: np.ndarray) -> str:
@@ -599,19 +738,32 @@ def summary_markdown(episodes: list[Episode], starts: np.ndarray) -> str:
 
 def _log_metrics(rec, episodes: list[Episode], starts: np.ndarray) -> None:
     rr = _rr()
-    idx = [rr.TimeColumn("time", duration=[s + e.t[0] for e, s in zip(episodes, starts, strict=True)]),
-           rr.TimeColumn("episode", sequence=[e.episode for e in episodes])]
+    idx = [
+        _time_column([s + e.t[0] for e, s in zip(episodes, starts, strict=True)]),
+        rr.TimeColumn("episode", sequence=[e.episode for e in episodes]),
+    ]
     texts = [metrics_markdown(e, s) for e, s in zip(episodes, starts, strict=True)]
-    _send(rec, "metrics/episode", idx,
-          rr.TextDocument.columns(text=texts, media_type=["text/markdown"] * len(texts)))
-    rec.log("metrics/summary", rr.TextDocument(summary_markdown(episodes, starts), media_type="text/markdown"),
-            static=True)
+    _send(
+        rec,
+        "metrics/episode",
+        idx,
+        rr.TextDocument.columns(text=texts, media_type=["text/markdown"] * len(texts)),
+    )
+    rec.log(
+        "metrics/summary",
+        rr.TextDocument(summary_markdown(episodes, starts), media_type="text/markdown"),
+        static=True,
+    )
     keys = sorted({k for e in episodes for k, v in e.metrics.items() if _finite(v) and k != "episode"})
     for k in keys:
         have = [e for e in episodes if _finite(e.metrics.get(k))]
         order = np.argsort([e.episode for e in have])
-        _send(rec, f"episode_metrics/{_esc(k)}", [rr.TimeColumn("episode", sequence=[have[i].episode for i in order])],
-              rr.Scalars.columns(scalars=[float(have[i].metrics[k]) for i in order]))
+        _send(
+            rec,
+            f"episode_metrics/{_esc(k)}",
+            [rr.TimeColumn("episode", sequence=[have[i].episode for i in order])],
+            rr.Scalars.columns(scalars=[float(have[i].metrics[k]) for i in order]),
+        )
 
 
 def _log_extras(rec, episodes: list[Episode], starts: np.ndarray) -> None:
@@ -622,7 +774,11 @@ def _log_extras(rec, episodes: list[Episode], starts: np.ndarray) -> None:
         times, pts, sizes = [], [], []
         for e, s in zip(episodes, starts, strict=True):
             for m in e.extras.get(name, []):
-                p = np.asarray(m.get("position", []), dtype=np.float64).reshape(-1, 3) if "position" in m else None
+                p = (
+                    np.asarray(m.get("position", []), dtype=np.float64).reshape(-1, 3)
+                    if "position" in m
+                    else None
+                )
                 if p is None or p.size == 0:
                     continue
                 times.append(s + float(m["t"]))
@@ -632,34 +788,60 @@ def _log_extras(rec, episodes: list[Episode], starts: np.ndarray) -> None:
             continue
         color = [(30, 144, 255), (255, 165, 0), (160, 32, 240)][i % 3]
         rec.log(f"world/{_esc(name)}", rr.Points3D.from_fields(colors=[color], radii=0.02), static=True)
-        _send(rec, f"world/{_esc(name)}", [rr.TimeColumn("time", duration=times)],
-              rr.Points3D.columns(positions=np.concatenate(pts)).partition(sizes))
+        _send(
+            rec,
+            f"world/{_esc(name)}",
+            [_time_column(times)],
+            rr.Points3D.columns(positions=np.concatenate(pts)).partition(sizes),
+        )
 
 
 def _episodes_blueprint(robot: RobotInfo, episodes: list[Episode], timeline: str = "time"):
     import rerun.blueprint as rrb
 
+    def joint_view(j: int, name: str, q: str):
+        axis = None
+        if q in robot.limits:  # limits inside the plot, not on its border
+            lo, hi = (float(x) for x in robot.limits[q][j])
+            pad = 0.08 * (hi - lo) if hi > lo else 1.0
+            axis = rrb.ScalarAxis(range=(lo - pad, hi + pad))
+        return rrb.TimeSeriesView(
+            origin=f"/joints/{_esc(name)}/{q}",
+            name=f"{name} {q} [{UNITS[q]}]",
+            axis_y=axis,
+            plot_legend=rrb.PlotLegend(visible=False),
+        )
+
     joint_tabs = [
-        rrb.Vertical(*[rrb.TimeSeriesView(origin=f"/joints/{_esc(j)}/{q}", name=f"{q} [{UNITS[q]}]")
-                       for q in QUANTITIES], name=j)
-        for j in robot.joint_names
+        rrb.Vertical(*[joint_view(j, name, q) for q in QUANTITIES], name=name)
+        for j, name in enumerate(robot.joint_names)
     ]
     overview = rrb.Vertical(
         rrb.TimeSeriesView(origin="/deviation/cartesian_cm", name="TCP deviation at equal arc length [cm]"),
         rrb.TimeSeriesView(origin="/deviation/joint_rad", name="joint deviation at equal arc length [rad]"),
-        rrb.TimeSeriesView(origin="/progress", name="path progress (fraction of the reference arc length)",
-                           axis_y=rrb.ScalarAxis(range=(0.0, 1.05))),
+        rrb.TimeSeriesView(
+            origin="/progress",
+            name="path progress (fraction of the reference arc length)",
+            axis_y=rrb.ScalarAxis(range=(0.0, 1.05)),
+        ),
         name="progress & deviation",
     )
-    table = rrb.Vertical(rrb.TextDocumentView(origin="/metrics/summary", name="episodes"),
-                         rrb.TimeSeriesView(origin="/episode_metrics", name="metrics per episode (timeline: episode)"),
-                         name="episodes")
+    table = rrb.Vertical(
+        rrb.TextDocumentView(origin="/metrics/summary", name="episodes"),
+        rrb.TimeSeriesView(origin="/episode_metrics", name="metrics per episode (timeline: episode)"),
+        name="episodes",
+    )
     return rrb.Blueprint(
         rrb.Horizontal(
-            rrb.Vertical(rrb.Spatial3DView(origin="/world", name=f"{robot.name}: reference (green) vs executed (red)",
-                                           eye_controls=_eye(episodes)),
-                         rrb.TextDocumentView(origin="/metrics/episode", name="episode metrics"),
-                         row_shares=[3, 2]),
+            rrb.Vertical(
+                rrb.Spatial3DView(
+                    origin="/world",
+                    name=f"{robot.name}: reference (green) vs executed (red)",
+                    eye_controls=_eye(episodes),
+                ),
+                rrb.TextDocumentView(origin="/metrics/episode", name="episode metrics"),
+                row_shares=[5, 3],
+            ),
             rrb.Tabs(overview, *joint_tabs, table, active_tab=ACTIVE_TAB),
             column_shares=[3, 2],
         ),
@@ -680,65 +862,95 @@ def _eye(episodes: list[Episode]):
                 pts.append(arr.reshape(-1, 3))
     pts = np.concatenate(pts)
     lo, hi = pts.min(axis=0), pts.max(axis=0)
-    hi[2] = max(hi[2], 1.0)  # keep a ~1 m tall robot in view even if the paths are low
+    hi[2] = max(hi[2] + 0.25, 1.0)  # the robot reaches above its TCP paths
     target = (lo + hi) / 2
     size = float(np.linalg.norm(hi - lo))
     direction = np.array([1.0, -1.3, 0.55]) / np.linalg.norm([1.0, -1.3, 0.55])
-    return rrb.EyeControls3D(position=target + direction * max(0.9 * size, 1.2), look_target=target,
-                             eye_up=[0.0, 0.0, 1.0])
+    return rrb.EyeControls3D(
+        position=target + direction * max(0.8 * size, 1.0), look_target=target, eye_up=[0.0, 0.0, 1.0]
+    )
 
 
 def run_to_rrd(src: Path, out: Path) -> ConvertStats:
-    """Convert the training curves (and config) of a ``run.mcap`` into the recording `out`."""
+    """Convert the training curves (and config) of a ``run.mcap`` into the recording `out`.
+
+    Tags ending in ``/time`` (RSL-RL's ``Train/mean_reward/time``: step = elapsed seconds) go on the
+    ``train_time`` timeline (seconds), every other tag on ``iteration``.
+    """
     t0 = time.perf_counter()
     config, curves = read_run(src)
     if not curves and config is None:
         raise ViewError(f"{src}: no /train/scalars or /run/config messages")
     rr = _rr()
-    rec = rr.RecordingStream("pathrl", recording_id=f"run:{src.resolve()}")
+    rec = rr.RecordingStream("pathrl")
     tmp = out.with_name(out.name + ".tmp")
-    rec.save(tmp, default_blueprint=_run_blueprint(curves, config is not None))
-    for tag, (its, vals) in curves.items():
-        ent = "training/" + "/".join(_esc(p) for p in tag.split("/") if p)
-        rec.log(ent, rr.SeriesLines(names=tag), static=True)
-        _send(rec, ent, [rr.TimeColumn("iteration", sequence=its)], rr.Scalars.columns(scalars=vals))
-    if config is not None:
-        rec.log("training/config", rr.TextDocument(_config_markdown(config), media_type="text/markdown"),
-                static=True)
-    rec.flush()
-    rec.disconnect()
+    rec.save(tmp, default_blueprint=_run_blueprint(list(curves), config is not None))
+    rec.send_recording_name(f"{src.parent.name}/{src.name}")
+    with _removed_on_error(tmp):
+        for tag, (its, vals) in curves.items():
+            ent = _tag_entity(tag)
+            rec.log(ent, rr.SeriesLines(names=tag), static=True)
+            index = (
+                rr.TimeColumn("train_time", duration=its.astype(np.float64))
+                if _is_time_tag(tag)
+                else rr.TimeColumn("iteration", sequence=its)
+            )
+            _send(rec, ent, [index], rr.Scalars.columns(scalars=vals))
+        if config is not None:
+            rec.log(
+                "training/config",
+                rr.TextDocument(_config_markdown(config), media_type="text/markdown"),
+                static=True,
+            )
+        rec.flush()
+        rec.disconnect()
     tmp.replace(out)
     return ConvertStats(out, "run", len(curves), time.perf_counter() - t0, out.stat().st_size)
+
+
+def _is_time_tag(tag: str) -> bool:
+    return tag.endswith("/time")
+
+
+def _tag_entity(tag: str) -> str:
+    return "training/" + "/".join(_esc(p) for p in tag.split("/") if p)
 
 
 def _config_markdown(config: Any) -> str:
     import yaml
 
-    body = yaml.safe_dump(config, sort_keys=False, default_flow_style=False) if isinstance(config, dict) else str(config)
+    body = (
+        yaml.safe_dump(config, sort_keys=False, default_flow_style=False)
+        if isinstance(config, dict)
+        else str(config)
+    )
     return f"### Run config\n\n```yaml\n{body}```\n"
 
 
-def _run_blueprint(curves: dict[str, Any], has_config: bool):
+def _run_blueprint(tags: list[str], has_config: bool):
+    """One tab per tag group (``Loss``, ``Train``, ``Perf``, ...) with a grid of plots; config beside it."""
     import rerun.blueprint as rrb
 
-    groups = sorted({tag.split("/")[0] if "/" in tag else "other" for tag in curves})
-    views = []
-    for g in groups:
-        if g == "other":
-            for tag in curves:
-                if "/" not in tag:
-                    views.append(rrb.TimeSeriesView(origin=f"/training/{_esc(tag)}", name=tag))
-        else:
-            for tag in curves:
-                if tag.split("/")[0] == g:
-                    views.append(rrb.TimeSeriesView(origin="/training/" + "/".join(_esc(p) for p in tag.split("/")),
-                                                    name=tag))
-    parts = [rrb.Grid(*views, name="training curves")] if views else []
+    groups: dict[str, list[str]] = {}
+    for tag in tags:
+        group = tag.split("/")[0] if "/" in tag else "other"
+        groups.setdefault(group + (" (timeline train_time)" if _is_time_tag(tag) else ""), []).append(tag)
+    tabs = [
+        rrb.Grid(*[rrb.TimeSeriesView(origin=_tag_entity(t), name=t) for t in ts], name=g)
+        for g, ts in groups.items()
+    ]
+    parts = []
+    if tabs:
+        parts.append(rrb.Tabs(*tabs, name="training curves"))
     if has_config:
         parts.append(rrb.TextDocumentView(origin="/training/config", name="config"))
-    return rrb.Blueprint(rrb.Horizontal(*parts, column_shares=[3, 1][: len(parts)]) if parts else rrb.Grid(),
-                         rrb.BlueprintPanel(state="collapsed"), rrb.SelectionPanel(state="collapsed"),
-                         rrb.TimePanel(timeline="iteration", state="collapsed", play_state="paused"))
+    layout = rrb.Horizontal(*parts, column_shares=[3, 1]) if len(parts) == 2 else parts[0]
+    return rrb.Blueprint(
+        layout,
+        rrb.BlueprintPanel(state="collapsed"),
+        rrb.SelectionPanel(state="collapsed"),
+        rrb.TimePanel(timeline="iteration", state="collapsed", play_state="following"),
+    )
 
 
 # --------------------------------------------------------------------------------------------- viewer
@@ -758,8 +970,9 @@ def spawn_viewer(files: Iterable[Path]) -> subprocess.Popen:
 
 def serve_web(files: Iterable[Path], port: int = 9090) -> int:
     """Serve `files` in Rerun's web viewer (blocks until interrupted); returns the viewer's exit code."""
-    return subprocess.call([*rerun_command(), "--serve-web", "--web-viewer-port", str(port), *map(str, files)])
-
-
-def quiet_rerun_warnings() -> None:
-    warnings.filterwarnings("ignore", category=UserWarning, module="rerun")
+    try:
+        return subprocess.call(
+            [*rerun_command(), "--serve-web", "--web-viewer-port", str(port), *map(str, files)]
+        )
+    except KeyboardInterrupt:  # the normal way to stop serving
+        return 0

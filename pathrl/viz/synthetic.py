@@ -1,8 +1,8 @@
-"""Synthetic ``episodes.mcap`` / ``run.mcap`` files in the evaluation and training layouts (tests, demo, bench).
+"""Synthetic ``episodes.mcap`` / ``run.mcap`` in the evaluation and training layouts (tests, demo, bench).
 
 The episodes are made up but kinematically consistent: a smooth joint-space reference curve per episode,
-an executed trajectory that follows it with a smooth time-scaling plus a small bounded deviation, decision-step
-velocities/accelerations by finite differences, and TCP positions by forward kinematics of the robot.
+an executed trajectory that follows it with a smooth time-scaling plus a small bounded deviation,
+decision-step velocities/accelerations by finite differences, and TCP positions by forward kinematics.
 """
 
 from __future__ import annotations
@@ -20,8 +20,9 @@ def _arc_length(q: np.ndarray) -> np.ndarray:
     return np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(q, axis=0), axis=1))])
 
 
-def write_synthetic_episodes(path: str | Path, robot: str = "iiwa7", episodes: int = 3, steps: int = 45,
-                             seed: int = 0, dt: float = DT) -> Path:
+def write_synthetic_episodes(
+    path: str | Path, robot: str = "iiwa7", episodes: int = 3, steps: int = 45, seed: int = 0, dt: float = DT
+) -> Path:
     """Write `episodes` episodes of about `steps` decision steps for conf robot `robot`; returns `path`."""
     from pathrl.robot.kinematics import ForwardKinematics
     from pathrl.robot.model import load_robot_by_name
@@ -34,14 +35,21 @@ def write_synthetic_episodes(path: str | Path, robot: str = "iiwa7", episodes: i
     pidx = spec.path_index
     path = Path(path)
     with McapJsonWriter(path) as w:
-        w.write("/eval/robot", {
-            "robot": spec.name, "joint_names": list(spec.joints), "path_joints": list(spec.path_joints),
-            "position_limits": spec.pos_limits.tolist(),
-            "velocity_limits": [[-v, v] for v in spec.vel_limits.tolist()],
-            "acceleration_limits": [[-v, v] for v in spec.acc_limits.tolist()],
-            "jerk_limits": [[-v, v] for v in spec.jerk_limits.tolist()],
-            "urdf": str(spec.urdf), "tcp_links": [t.link for t in spec.tcps],
-        }, 0)
+        w.write(
+            "/eval/robot",
+            {
+                "robot": spec.name,
+                "joint_names": list(spec.joints),
+                "path_joints": list(spec.path_joints),
+                "position_limits": spec.pos_limits.tolist(),
+                "velocity_limits": [[-v, v] for v in spec.vel_limits.tolist()],
+                "acceleration_limits": [[-v, v] for v in spec.acc_limits.tolist()],
+                "jerk_limits": [[-v, v] for v in spec.jerk_limits.tolist()],
+                "urdf": str(spec.urdf),
+                "tcp_links": [t.link for t in spec.tcps],
+            },
+            0,
+        )
         t_ns = 0
         for ep in range(episodes):
             q0 = mid + rng.uniform(-0.35, 0.35, spec.dof) * half
@@ -67,27 +75,60 @@ def write_synthetic_episodes(path: str | Path, robot: str = "iiwa7", episodes: i
             acc = np.gradient(vel, dt, axis=0)
             vel[0] = acc[0] = 0.0
             tcp_p, tcp_q = (x.numpy() for x in fk.tcp_poses(q))
-            w.write("/eval/reference", {"episode": ep, "path": f"synthetic_{ep:04d}", "s": s + start_s,
-                                        "position": q_ref[:, pidx], "tcp_position": tcp_ref}, t_ns)
+            w.write(
+                "/eval/reference",
+                {
+                    "episode": ep,
+                    "path": f"synthetic_{ep:04d}",
+                    "s": s + start_s,
+                    "position": q_ref[:, pidx],
+                    "tcp_position": tcp_ref,
+                },
+                t_ns,
+            )
             for k in range(n + 1):
                 tk = t_ns + int(round(k * dt * 1e9))
-                w.write("/eval/joint_state", {"episode": ep, "t": k * dt, "position": q[k], "velocity": vel[k],
-                                              "acceleration": acc[k]}, tk)
-                w.write("/eval/tcp", {"episode": ep, "t": k * dt, "position": tcp_p[k],
-                                      "orientation_xyzw": tcp_q[k]}, tk)
+                w.write(
+                    "/eval/joint_state",
+                    {
+                        "episode": ep,
+                        "t": k * dt,
+                        "position": q[k],
+                        "velocity": vel[k],
+                        "acceleration": acc[k],
+                    },
+                    tk,
+                )
+                w.write(
+                    "/eval/tcp",
+                    {"episode": ep, "t": k * dt, "position": tcp_p[k], "orientation_xyzw": tcp_q[k]},
+                    tk,
+                )
             t_ns += int(round((n + 1) * dt * 1e9))
-            dev_cm = 100 * np.linalg.norm(fk.tcp_positions_np(q) - fk.tcp_positions_np(ref_at(blend * arc[-1])),
-                                          axis=-1)
+            dev_cm = 100 * np.linalg.norm(
+                fk.tcp_positions_np(q) - fk.tcp_positions_np(ref_at(blend * arc[-1])), axis=-1
+            )
             jdev = np.linalg.norm(q[:, pidx] - ref_at(blend * arc[-1])[:, pidx], axis=1)
-            w.write("/eval/episode_metrics", {
-                "episode": ep, "path": f"synthetic_{ep:04d}", "start_s": start_s, "end_s": start_s + arc[-1],
-                "duration_s": n * dt, "termination": "robot_stopped", "terminated_early": False,
-                "joint_dev_mean_rad": float(jdev.mean()), "joint_dev_max_rad": float(jdev.max()),
-                "joint_dev_final_rad": float(jdev[-1]),
-                "cart_pos_dev_mean_cm": float(dev_cm.mean()), "cart_pos_dev_max_cm": float(dev_cm.max()),
-                "cart_pos_dev_final_cm": float(dev_cm[-1].mean()),
-                "limit_violations": 0,
-            }, t_ns)
+            w.write(
+                "/eval/episode_metrics",
+                {
+                    "episode": ep,
+                    "path": f"synthetic_{ep:04d}",
+                    "start_s": start_s,
+                    "end_s": start_s + arc[-1],
+                    "duration_s": n * dt,
+                    "termination": "robot_stopped",
+                    "terminated_early": False,
+                    "joint_dev_mean_rad": float(jdev.mean()),
+                    "joint_dev_max_rad": float(jdev.max()),
+                    "joint_dev_final_rad": float(jdev[-1]),
+                    "cart_pos_dev_mean_cm": float(dev_cm.mean()),
+                    "cart_pos_dev_max_cm": float(dev_cm.max()),
+                    "cart_pos_dev_final_cm": float(dev_cm[-1].mean()),
+                    "limit_violations": 0,
+                },
+                t_ns,
+            )
             w.flush()
     return path
 
@@ -97,8 +138,14 @@ def write_synthetic_run(path: str | Path, iterations: int = 50, seed: int = 0) -
     rng = np.random.default_rng(seed)
     path = Path(path)
     with McapJsonWriter(path) as w:
-        w.write("/run/config", {"config": {"robot": {"name": "iiwa7"}, "seed": seed, "reward": {"w_dev": 1.0}},
-                                "train_cfg": {"num_steps_per_env": 24, "algorithm": {"class_name": "PPO"}}}, 0)
+        w.write(
+            "/run/config",
+            {
+                "config": {"robot": {"name": "iiwa7"}, "seed": seed, "reward": {"w_dev": 1.0}},
+                "train_cfg": {"num_steps_per_env": 24, "algorithm": {"class_name": "PPO"}},
+            },
+            0,
+        )
         for it in range(iterations):
             values = {
                 "Loss/value": float(np.exp(-it / 20) + 0.05 * rng.random()),
@@ -109,4 +156,13 @@ def write_synthetic_run(path: str | Path, iterations: int = 50, seed: int = 0) -
             if it >= 2:  # appears only after the first episodes end, as in RSL-RL
                 values["Train/mean_episode_length"] = float(60 - 20 * (1 - np.exp(-it / 15)))
             w.write("/train/scalars", {"iteration": it, "values": values}, (it + 1) * 10**9)
+            if it >= 2:  # McapLogWriter keys RSL-RL's `.../time` tags by their step: elapsed whole seconds
+                w.write(
+                    "/train/scalars",
+                    {
+                        "iteration": int(2.5 * it),
+                        "values": {"Train/mean_reward/time": values["Train/mean_reward"]},
+                    },
+                    (it + 1) * 10**9 + 1,
+                )
     return path

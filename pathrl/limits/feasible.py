@@ -1,0 +1,208 @@
+"""Valid acceleration range per joint: the safety core of the action mapping.
+
+At every decision step (period ``dt``, 0.1 s) the policy picks, per joint, the acceleration at the END
+of the next step; within the step the acceleration is interpolated linearly (constant jerk). This
+module computes the range of such end accelerations for which position, velocity, acceleration and jerk
+limits hold during the step and can still be held afterwards (the joint can always brake in time).
+
+The range reproduces ``klimits.PosVelJerkLimitation`` (1.1.3) with the settings of the original work
+(``acceleration_after_max_vel_limit_factor=0.01``, ``set_velocity_after_max_pos_to_zero=True``,
+``limit_velocity=True``, ``limit_position=True``) as a batched, loop-free torch computation:
+
+* jerk: ``a0 -/+ jerk*dt``;
+* velocity: the acceleration must be rampable to zero with full jerk before ``|v|`` exceeds the limit
+  (TrueAdapt eqs. 11/12, with klimits' refinement that parks the ramp at ``-/+0.01*a_max`` on a knot);
+* position: the lowest possible braking trajectory ("greedy": full jerk down, reduced jerk onto
+  ``-a_max``, hold) must peak at or before the limit; this is exact (Newton's method on a convex
+  function, or closed form inside the step). klimits then additionally asks the braking to end with
+  ``v = 0`` on a decision step (knot) at the limit, which can only shrink the range;
+* klimits' conflict resolution (drop jerk, then velocity, if the ranges do not overlap) and the final
+  clip to ``[-a_max, a_max]``.
+
+Differences to klimits are confined to corner cases of its internal root finding; see
+``tests/test_limits.py`` for the measured agreement.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+from torch import Tensor
+
+from pathrl.limits._braking import Side, greedy_bound, in_step_bound, reach_top
+from pathrl.limits._knot import knot_stop_bound
+from pathrl.limits._velocity import velocity_bound, velocity_emergency
+
+DEFAULT_DT = 0.1
+SETTLE_FACTOR = 0.01  # klimits acceleration_after_max_vel_limit_factor of the original work
+CONFLICT_TOL = 1e-3  # klimits: ranges overlapping by less than this count as conflicting
+OUTSIDE_TOL = 1e-9  # positions this far beyond a limit are rounding (stops end exactly on the limit)
+KNOT_SLACK = 0.5  # the knot refinement lowers the greedy bound by less than this times acc (~0.2 seen)
+PLAN_MARGIN = 1e-10  # braking plans stop this far (rad or m) inside the limit; absorbs rounding
+
+
+@dataclass(frozen=True)
+class JointLimits:
+    """Kinematic joint limits as float64 tensors.
+
+    Attributes:
+        pos: (D, 2) position limits [lower, upper] (rad or m).
+        vel, acc, jerk: (D,) symmetric magnitude limits (per s, s^2, s^3).
+    """
+
+    pos: Tensor
+    vel: Tensor
+    acc: Tensor
+    jerk: Tensor
+
+    def __post_init__(self) -> None:
+        d = self.vel.shape[0]
+        if self.pos.shape != (d, 2) or any(t.shape != (d,) for t in (self.acc, self.jerk)):
+            raise ValueError("JointLimits: expected pos (D, 2) and vel/acc/jerk (D,)")
+        if bool((self.pos[:, 0] >= self.pos[:, 1]).any()):
+            raise ValueError("JointLimits: empty position range")
+        if any(bool((t <= 0).any()) for t in (self.vel, self.acc, self.jerk)):
+            raise ValueError("JointLimits: vel/acc/jerk limits must be positive")
+
+    @classmethod
+    def from_arrays(cls, pos, vel, acc, jerk, device: str | torch.device = "cpu") -> JointLimits:
+        """Build from array-likes (converted to float64 tensors on ``device``)."""
+
+        def f(x) -> Tensor:
+            return torch.as_tensor(np.asarray(x, dtype=np.float64), device=device)
+
+        return cls(f(pos), f(vel), f(acc), f(jerk))
+
+    @classmethod
+    def from_robot(cls, spec, device: str | torch.device = "cpu") -> JointLimits:
+        """Limits of a :class:`pathrl.robot.model.RobotSpec` (joint order of ``spec.joints``)."""
+        return cls.from_arrays(spec.pos_limits, spec.vel_limits, spec.acc_limits, spec.jerk_limits, device)
+
+    def to(self, device: str | torch.device) -> JointLimits:
+        """Copy onto ``device``."""
+        return JointLimits(*(t.to(device) for t in (self.pos, self.vel, self.acc, self.jerk)))
+
+    @property
+    def dof(self) -> int:
+        """Number of joints D."""
+        return int(self.vel.shape[0])
+
+
+def action_to_acceleration(action: Tensor, a_min: Tensor, a_max: Tensor) -> Tensor:
+    """Map actions in [-1, 1] (clipped) linearly onto ``[a_min, a_max]``; all (N, D)."""
+    return a_min + 0.5 * (1.0 + action.clamp(-1.0, 1.0)) * (a_max - a_min)
+
+
+def valid_acceleration_range(p: Tensor, v: Tensor, a: Tensor, limits: JointLimits,
+                             dt: float = DEFAULT_DT) -> tuple[Tensor, Tensor]:
+    """Valid range for the acceleration at the end of the next step.
+
+    Args:
+        p, v, a: (N, D) float64 position, velocity, acceleration at the current decision step.
+        limits: joint limits (D joints).
+        dt: decision step (s).
+
+    Returns:
+        ``(a_min, a_max)``, each (N, D), physical units, ``a_min <= a_max``, within ``[-acc, acc]``.
+    """
+    return _valid_range(p, v, a, limits, dt, stop_at_knot=True)
+
+
+def _valid_range(p: Tensor, v: Tensor, a: Tensor, limits: JointLimits, dt: float,
+                 stop_at_knot: bool) -> tuple[Tensor, Tensor]:
+    """:func:`valid_acceleration_range`; ``stop_at_knot=False`` drops klimits' stop-on-a-knot refinement
+    (the result then equals klimits with ``set_velocity_after_max_pos_to_zero=False``; only for tests,
+    it is not safe for joints whose velocity limit is small against ``acc*dt``)."""
+    amax, jmax, vmax = limits.acc, limits.jerk, limits.vel
+    # Side 0 bounds from above; side 1 is the mirrored joint, whose upper bound is minus the lower bound.
+    p0, v0, a0 = torch.stack((p, -p)), torch.stack((v, -v)), torch.stack((a, -a))
+    pmax = torch.stack((limits.pos[:, 1], -limits.pos[:, 0])).unsqueeze(1).expand_as(p0)
+    jerk_hi = a0 + jmax * dt
+    vel_hi = _velocity_side(v0, a0, vmax, amax, jmax, dt)
+    cap = torch.minimum(torch.minimum(jerk_hi, vel_hi), amax)
+    pos_hi, knot_hi = _position_side(p0, v0, a0, pmax, limits, dt, cap, stop_at_knot)
+    lo, hi = _combine(jerk_hi, vel_hi, pos_hi, knot_hi)
+    return lo.clamp(-amax, amax), hi.clamp(-amax, amax)
+
+
+def _velocity_side(v0: Tensor, a0: Tensor, vmax: Tensor, amax: Tensor, jmax: Tensor, dt: float) -> Tensor:
+    """(2, N, D) velocity upper bound per side, with klimits' emergency overrides."""
+    bound = velocity_bound(v0, a0, vmax, amax, jmax, dt, SETTLE_FACTOR)
+    urgent = velocity_emergency(v0, a0, vmax, amax, dt)
+    bound = torch.where(urgent.flip(0), amax, bound)  # the other side must brake: klimits leaves +acc here
+    return torch.where(urgent, -amax, bound)
+
+
+def _position_side(p0: Tensor, v0: Tensor, a0: Tensor, pmax: Tensor, limits: JointLimits, dt: float,
+                   cap: Tensor, stop_at_knot: bool) -> tuple[Tensor, Tensor]:
+    """(2, N, D) safe and knot-refined position upper bounds per side (+inf where irrelevant).
+
+    Only elements whose braking could reach the limit for some ``x <= cap + KNOT_SLACK*acc`` are
+    computed: a per-joint radius prunes most, a cheap per-element bound the rest.
+    """
+    amax, jmax, vmax = limits.acc, limits.jerk, limits.vel
+    shape = p0.shape
+    safe = torch.full(shape, float("inf"), dtype=p0.dtype, device=p0.device)
+    knot = safe.clone()
+    zero = torch.zeros_like(vmax)
+    radius = reach_top(zero, vmax, amax, amax, jmax, dt, (1.0 + KNOT_SLACK) * amax)
+    near = ((pmax - p0) <= radius).reshape(-1).nonzero().squeeze(-1)
+    if near.numel() == 0:
+        return safe, knot
+    flat = [t.expand(shape).reshape(-1)[near] for t in (p0, v0, a0, pmax, amax, jmax, vmax, cap)]
+    s, cap = Side(*flat[:7]), flat[7]
+    probe = cap + KNOT_SLACK * s.amax
+    keep = (reach_top(s.p, s.v, s.a, s.amax, s.jmax, dt, probe) >= s.pmax - 1e-9).nonzero().squeeze(-1)
+    if keep.numel() == 0:
+        return safe, knot
+    sf, kn = _position_subset(s.take(keep), dt, probe[keep], stop_at_knot)
+    safe.view(-1)[near[keep]] = sf
+    knot.view(-1)[near[keep]] = kn
+    return safe, knot
+
+
+def _position_subset(s: Side, dt: float, probe: Tensor, stop_at_knot: bool) -> tuple[Tensor, Tensor]:
+    """Safe (velocity-aware greedy) and knot-refined bounds for a flat subset of elements."""
+    inside = in_step_bound(s, dt)
+    s.pmax = s.pmax - PLAN_MARGIN  # plans end slightly inside, so the next in-step check has slack
+    greedy, safe, peak = greedy_bound(s, dt, probe, SETTLE_FACTOR)
+    outside = s.p > s.pmax + PLAN_MARGIN + OUTSIDE_TOL  # klimits: reach the limit at the step end
+    recover = 6.0 * (s.pmax - s.p - s.v * dt) / dt**2 - 2.0 * s.a
+    safe = torch.where(outside, recover, torch.minimum(inside, safe))
+    if not stop_at_knot:
+        return torch.where(outside, recover, torch.minimum(inside, greedy)), safe
+    # klimits' refinement follows the greedy peak after the step even where the in-step bound is tighter.
+    knot = torch.minimum(knot_stop_bound(s, dt, peak), safe)
+    return safe, torch.where(outside, safe, knot)
+
+
+def _combine(jerk_hi: Tensor, vel_hi: Tensor, pos_hi: Tensor, knot_hi: Tensor) -> tuple[Tensor, Tensor]:
+    """Intersect the (2, N, D) per-side upper bounds; returns (lo, hi) in joint coordinates.
+
+    Like klimits: the stop-on-a-knot position range replaces the plain one unless it is empty (by
+    more than ``CONFLICT_TOL``). If jerk, velocity and position ranges do not overlap, klimits drops the
+    jerk range, then the velocity range, and returns the rest. Such states lie outside the valid set
+    (they are never reached from inside it); here the result is instead the single point of the
+    remaining range closest to the dropped one, which violates the dropped limit as little as possible.
+    """
+    lo_k, hi_k = -knot_hi[1], knot_hi[0]
+    crossed = lo_k > hi_k
+    mid = 0.5 * (lo_k + hi_k)
+    refine = lo_k - hi_k < CONFLICT_TOL
+    lo_p = torch.where(refine, torch.where(crossed, mid, lo_k), -pos_hi[1])
+    hi_p = torch.where(refine, torch.where(crossed, mid, hi_k), pos_hi[0])
+    lo_vp = torch.maximum(-vel_hi[1], lo_p)
+    hi_vp = torch.minimum(vel_hi[0], hi_p)
+    bad_vp = lo_vp - hi_vp > CONFLICT_TOL  # velocity against position: keep position
+    lo_vp = torch.where(bad_vp, torch.where(lo_p > vel_hi[0], lo_p, hi_p), lo_vp)
+    hi_vp = torch.where(bad_vp, lo_vp, hi_vp)
+    lo = torch.maximum(-jerk_hi[1], lo_vp)
+    hi = torch.minimum(jerk_hi[0], hi_vp)
+    bad = lo - hi > CONFLICT_TOL  # jerk against the rest: keep the rest
+    lo = torch.where(bad, torch.where(lo_vp > jerk_hi[0], lo_vp, hi_vp), lo)
+    hi = torch.where(bad, lo, hi)
+    mid = 0.5 * (lo + hi)
+    crossed = lo > hi
+    return torch.where(crossed, mid, lo), torch.where(crossed, mid, hi)

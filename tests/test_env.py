@@ -1,0 +1,134 @@
+"""The batched tracking env: VecEnv contract, MDP details, online path replacement, the numpy oracle."""
+
+import numpy as np
+import pytest
+import torch
+from tensordict import TensorDict
+
+from pathrl.envs.reference import ReferencePath, ReferenceTrackingEnv
+from pathrl.envs.rewards import StepQuantities, build_reward_terms, path_length
+from pathrl.envs.tracking import PathTrackingEnv, TrackingEnvCfg
+from pathrl.limits.braking import braking_acceleration
+from pathrl.limits.feasible import JointLimits
+from pathrl.paths.pathset import build_pathset
+from pathrl.paths.segments import Segments
+from pathrl.robot.model import load_robot_by_name
+
+REWARD = {"path_length": {"weight": 2.0}, "deviation_max": {"weight": 0.9}, "deviation_mean": {"weight": 0.9},
+          "action_saturation": {"weight": 0.4}}
+ROBOTS = ["iiwa7", "armar6", "armar4", "armar4_legs"]
+
+
+def smooth_paths(robot, n=4, seed=0):
+    rng = np.random.default_rng(seed)
+    lim = robot.pos_limits[robot.path_index]
+    mid, half = lim.mean(1), 0.35 * (lim[:, 1] - lim[:, 0]) / 2
+    t = np.linspace(0, 1, 120)[:, None]
+    return [mid + half * np.sin(2 * np.pi * rng.uniform(0.5, 1.5, (1, len(mid))) * t
+                                + rng.uniform(0, 6.28, (1, len(mid)))) for _ in range(n)]
+
+
+def make_env(robot_name="iiwa7", num_envs=16, **kw):
+    robot = load_robot_by_name(robot_name)
+    knots = smooth_paths(robot)
+    paths = build_pathset(knots, [f"p{i}" for i in range(len(knots))])
+    cfg = TrackingEnvCfg(num_envs=num_envs, seed=0, **kw)
+    return PathTrackingEnv(cfg, robot, paths, build_reward_terms(REWARD)), knots
+
+
+@pytest.mark.parametrize("robot_name", ROBOTS)
+def test_vecenv_contract(robot_name):
+    env, _ = make_env(robot_name, num_envs=8)
+    robot = env.robot
+    obs = env.get_observations()
+    assert isinstance(obs, TensorDict) and obs.batch_size == torch.Size([8])
+    m, k = robot.path_dof, env.cfg.n_state
+    assert obs["policy"].shape == (8, 3 * robot.dof + k * m + 2 + (k - 1))
+    assert env.num_actions == robot.dof and env.episode_length_buf.shape == (8,)
+    for _ in range(5):
+        obs, rew, dones, extras = env.step(torch.randn(8, robot.dof) * 3)  # unclipped actions
+        assert rew.shape == (8,) and dones.shape == (8,) and dones.dtype == torch.bool
+        assert extras["time_outs"].shape == (8,)
+        assert torch.isfinite(obs["policy"]).all() and torch.isfinite(rew).all()
+        assert (obs["policy"].abs() <= 1).all() and (rew >= 0).all()
+
+
+def test_tracking_exact_path_gives_full_reward_terms():
+    q = StepQuantities(*(torch.tensor([x], dtype=torch.float64) for x in (0.5, 0.5, 8.0, 0.0, 0.0, 0.5)),
+                       close_to_end=torch.tensor([False]))
+    assert float(path_length(q)) == pytest.approx(1.0)
+    q0 = StepQuantities(*(torch.tensor([x], dtype=torch.float64) for x in (0.0, 0.5, 8.0, 0.0, 0.0, 0.5)),
+                        close_to_end=torch.tensor([False]))
+    assert float(path_length(q0)) == pytest.approx(0.0)
+    q_end = StepQuantities(*(torch.tensor([x], dtype=torch.float64) for x in (0.0, 0.0, 8.0, 0.0, 0.0, 0.5)),
+                           close_to_end=torch.tensor([True]))
+    assert float(path_length(q_end)) == pytest.approx(1.0)  # standing still at the end
+
+
+def test_episode_ends_with_stop_after_path_end():
+    env, _ = make_env(num_envs=4, segments="full", episode_budget_s=60.0)
+    done_seen = torch.zeros(4, dtype=torch.bool)
+    for _ in range(400):
+        _, _, dones, extras = env.step(torch.ones(4, env.num_actions))  # full speed ahead
+        stopped = env.last_step["stopped"]
+        done_seen |= stopped
+        assert not bool(extras["time_outs"].any())
+        if bool(done_seen.all()):
+            break
+    assert bool(done_seen.all()), "robots must brake to a stop after the path end"
+
+
+def test_replace_path_mid_episode():
+    env, _ = make_env(num_envs=2)
+    ids = torch.tensor([0, 1])
+    env.start_segments(ids, Segments(torch.tensor([0, 0]), torch.zeros(2, dtype=torch.float64),
+                                     env.paths.length[[0, 0]].clone(), env.paths.num_knots[[0, 0]] - 1))
+    for _ in range(3):
+        env.step(torch.zeros(2, env.num_actions))
+    before = env.get_observations()["policy"].clone()
+    env.replace_path(torch.tensor([1]), torch.tensor([2]), torch.tensor([0.3], dtype=torch.float64))
+    after = env.get_observations()["policy"]
+    d, m = env.robot.dof, env.robot.path_dof
+    knots_now = after[1, 3 * d: 3 * d + m]
+    expect, _ = env.paths.window(torch.tensor([2]), torch.tensor([0.3], dtype=torch.float64), env.end_knot[[1]], 9)
+    lo, hi = env.limits.pos[:, 0], env.limits.pos[:, 1]
+    np.testing.assert_allclose(knots_now.double().numpy(), (2 * (expect[0, 0] - lo) / (hi - lo) - 1).numpy(), atol=1e-6)
+    assert torch.equal(after[0], before[0])  # untouched env keeps its observation
+    assert int(env.seg_path[1]) == 2 and int(env.seg_path[0]) == 0
+    env.step(torch.zeros(2, env.num_actions))  # and keeps running
+
+
+def test_matches_numpy_reference_oracle():
+    """Same path, same actions: states, rewards and terminations of the batched env match the oracle.
+
+    Tolerances: limits (torch vs klimits) and reference lookup (table vs spline) differ by < 1e-6.
+    """
+    env, knots = make_env(num_envs=1, segments="full", episode_budget_s=30.0)
+    robot = env.robot
+    lim = JointLimits.from_robot(robot)
+
+    def brake(p, v, a):
+        t = [torch.as_tensor(x).unsqueeze(0) for x in (p, v, a)]
+        return braking_acceleration(*t, lim, 0.1)[0].numpy()
+
+    path = ReferencePath(knots[0])
+    env.start_segments(torch.tensor([0]), Segments(torch.tensor([0]), torch.zeros(1, dtype=torch.float64),
+                                                   env.paths.length[[0]].clone(), env.paths.num_knots[[0]] - 1))
+    ref = ReferenceTrackingEnv(robot, path, 0.0, len(path.knots) - 1, build_reward_terms(REWARD),
+                               knot_gap=env.knot_gap, budget_steps=int(env.budget[0]), braking=brake)
+    rng = np.random.default_rng(0)
+    np.testing.assert_allclose(env.get_observations()["policy"][0].numpy(), ref.observation(), atol=1e-5)
+    for k in range(300):
+        a = rng.uniform(-0.6, 0.6, robot.dof)  # away from the position limits (limits have their own tests)
+        _, rew, dones, extras = env.step(torch.as_tensor(a).unsqueeze(0))
+        r = ref.step(a)
+        assert bool(dones[0]) == (r.terminated or r.time_out), f"step {k}"
+        np.testing.assert_allclose(float(env.last_step["moved"][0]), r.moved, atol=1e-6)
+        np.testing.assert_allclose(float(env.last_step["dev_max"][0]), r.dev_max, atol=1e-4)
+        np.testing.assert_allclose(float(rew[0]), r.reward, rtol=1e-3, atol=1e-3)
+        if r.terminated or r.time_out:
+            break
+        np.testing.assert_allclose(env.pos[0].numpy(), ref.pos, atol=1e-6, err_msg=f"step {k}")
+        np.testing.assert_allclose(env.vel[0].numpy(), ref.vel, atol=1e-6)
+        np.testing.assert_allclose(env.get_observations()["policy"][0].numpy(), ref.observation(), atol=1e-4)
+    assert r.terminated, "the oracle episode should end with a stop"
