@@ -77,9 +77,7 @@ def test_ball_balancing_paths_keep_plate_horizontal(tmp_path, checker):
     from pathrl.robot.kinematics import ForwardKinematics
 
     spec = load_robot_by_name("iiwa7")
-    generate_dataset(
-        robot_cfg("iiwa7"), dataset_cfg("ball_balancing"), dest=tmp_path / "ball", progress=False
-    )
+    generate_dataset(robot_cfg("iiwa7"), dataset_cfg("ball_balancing"), dest=tmp_path / "ball", progress=False)
     ds = load_dataset(tmp_path / "ball", spec)
     _check_paths(ds, spec, checker, 3.2, 5.1, tol=1e-9)
     fk = ForwardKinematics(spec)
@@ -96,9 +94,7 @@ def test_ball_balancing_paths_keep_plate_horizontal(tmp_path, checker):
 
 def test_ball_balancing_rejects_other_robots(tmp_path):
     with pytest.raises(DatasetError, match="iiwa7 only"):
-        generate_dataset(
-            robot_cfg("armar6"), dataset_cfg("ball_balancing"), dest=tmp_path / "x", progress=False
-        )
+        generate_dataset(robot_cfg("armar6"), dataset_cfg("ball_balancing"), dest=tmp_path / "x", progress=False)
     assert not (tmp_path / "x").exists()
 
 

@@ -83,6 +83,7 @@ def test_flat_dir_goes_to_test_and_config_in_parent(tmp_path, iiwa):
     truth = write_set(tmp_path / "set" / "test", rng, {"": 3})
     ds = import_kiemel(tmp_path / "set" / "test", tmp_path / "out", iiwa)
     assert ds.meta["splits"] == {"train": 0, "test": 3}
+    assert ds.meta["kind"] == "set"
     assert ds.meta["reference_max_knot_gap"] == 1.5
     assert ds.splits["test"].names == tuple(sorted(truth[""]))
 

@@ -83,7 +83,8 @@ def test_curved_path_respects_limits():
     # consistent finite differences (the samples are one trajectory)
     fd = np.diff(res.q, axis=0) * 240.0
     np.testing.assert_allclose(fd, 0.5 * (res.qd[1:] + res.qd[:-1]), atol=0.02)
-    assert np.isfinite(res.max_jerk) and res.max_jerk_ratio > 0
+    # TOPP-RA has no jerk limit: the jerk is reported, and exceeding it is not a violation
+    assert np.isfinite(res.max_jerk) and res.max_jerk_ratio > 1 and res.jerk_violations > 0
 
 
 def test_duration_close_to_default_toppra():

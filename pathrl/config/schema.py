@@ -108,6 +108,7 @@ class EnvCfg:
     max_deviation: float | None = None
     stop_tolerance: float = 0.01
     stop_bonus: bool = True
+    knot_obs: str = "relative"  # relative | absolute (paper)
 
 
 @dataclass

@@ -91,8 +91,8 @@ KINDS = ("random", "target_point", "ball_balancing")
 SPLIT_IDS = {"train": 0, "test": 1}
 
 _COMMON = {
-    "chunk_size": 25,  # paths per chunk (unit of seeding and of parallel work)
-    "batch_size": 64,  # at most this many candidate trajectories simulated together
+    "chunk_size": 100,  # paths per chunk (unit of seeding and of parallel work)
+    "batch_size": 256,  # at most this many candidate trajectories simulated together
     "dt": 0.1,  # decision step (s)
     "substeps": 4,  # recorded (and collision-checked) samples per decision step
     "max_duration": 60.0,  # longest simulated motion per candidate (s)
@@ -361,9 +361,7 @@ def solve_ik(
     if active.any():
         idx = active.nonzero().squeeze(1)
         x0 = ctx.fk.tcp_positions(q[idx]).reshape(len(idx), -1)
-        err_norm[idx] = (
-            (targets[idx].reshape(len(idx), -1) - x0).reshape(len(idx), -1, 3).norm(dim=-1).max(1).values
-        )
+        err_norm[idx] = (targets[idx].reshape(len(idx), -1) - x0).reshape(len(idx), -1, 3).norm(dim=-1).max(1).values
     return q, err_norm < tolerance
 
 
@@ -451,9 +449,7 @@ class _TargetPolicy:
 
     def _refill(self, rows: torch.Tensor, q_from: torch.Tensor) -> None:
         """Append ``goal_batch`` chained goals (each from the previous one) to the queues of `rows`."""
-        last = torch.stack(
-            [self.queue[r][-1] if self.queue[r] else q_from[i] for i, r in enumerate(rows.tolist())]
-        )
+        last = torch.stack([self.queue[r][-1] if self.queue[r] else q_from[i] for i, r in enumerate(rows.tolist())])
         for _ in range(int(self.p["goal_batch"])):
             last, failed = self.solve_goals(last)
             for i, r in enumerate(rows.tolist()):
@@ -727,9 +723,7 @@ def ball_paths(
     while len(out) < n_paths:
         tries += 1
         if tries > int(p["max_tries"]) * max(n_paths, 1):
-            raise GenerationError(
-                f"ball_balancing: only {len(out)} of {n_paths} valid paths in {tries} tries"
-            )
+            raise GenerationError(f"ball_balancing: only {len(out)} of {n_paths} valid paths in {tries} tries")
         stats["candidates"] = stats.get("candidates", 0) + 1
         length = lo + (hi - lo) * rng.beta(a_beta, b_beta)
         # start: uniform in (q1, q2, q4) with q6 = q4 - q2 in limits, plate in the workspace, collision free
@@ -933,9 +927,7 @@ class _ChunkFn:
     seed: int
 
     def __call__(self, job: _Job) -> dict[str, Any]:
-        return generate_chunk(
-            self.robot_cfg, self.kind, self.params, self.seed, SPLIT_IDS[job.split], job.chunk, job.n
-        )
+        return generate_chunk(self.robot_cfg, self.kind, self.params, self.seed, SPLIT_IDS[job.split], job.chunk, job.n)
 
 
 def generate_dataset(

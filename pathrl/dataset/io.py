@@ -175,9 +175,7 @@ def _validate_paths(split: str, paths: Sequence[tuple[str, np.ndarray]], where: 
         seen.add(name)
         k = np.asarray(knots)
         if k.ndim != 2 or k.shape[1] < 1:
-            raise DatasetError(
-                f"{where}: split {split!r}: path {name!r}: knots must be (K, M), got {k.shape}"
-            )
+            raise DatasetError(f"{where}: split {split!r}: path {name!r}: knots must be (K, M), got {k.shape}")
         if m is None:
             m = k.shape[1]
         elif k.shape[1] != m:
@@ -194,14 +192,10 @@ def _check_robot(meta: Mapping[str, Any], m: int | None, robot: RobotSpec | None
     if robot is None:
         return
     if m is not None and m != robot.path_dof:
-        raise DatasetError(
-            f"{where}: paths have {m} joints but robot {robot.name!r} has {robot.path_dof} path joints"
-        )
+        raise DatasetError(f"{where}: paths have {m} joints but robot {robot.name!r} has {robot.path_dof} path joints")
     joints = meta.get("path_joints")
     if joints and list(joints) != list(robot.path_joints):
-        raise DatasetError(
-            f"{where}: path_joints {list(joints)} differ from robot {robot.name!r}'s path joints"
-        )
+        raise DatasetError(f"{where}: path_joints {list(joints)} differ from robot {robot.name!r}'s path joints")
 
 
 # ----------------------------------------------------------------------------------------------------
@@ -274,9 +268,7 @@ def save_dataset(
         raise DatasetError(f"{where}: splits have different joint counts {sorted(ms)}")
     m = ms.pop() if ms else None
     if m is not None and meta.get("path_joints") and len(meta["path_joints"]) != m:
-        raise DatasetError(
-            f"{where}: meta path_joints has {len(meta['path_joints'])} names, paths have {m} joints"
-        )
+        raise DatasetError(f"{where}: meta path_joints has {len(meta['path_joints'])} names, paths have {m} joints")
     arrays = {split: pack(paths) for split, paths in splits.items()}
     if stats is None:
         stats = {split: {"stored": dataset_stats([k for _, k in paths])} for split, paths in splits.items()}
@@ -369,9 +361,7 @@ def load_dataset(path: str | os.PathLike, robot: RobotSpec | None = None) -> Dat
         if key not in meta:
             raise DatasetError(f"{meta_path}: missing key {key!r}")
     split_counts = meta["splits"]
-    if not isinstance(split_counts, dict) or not all(
-        isinstance(s, str) and s.isidentifier() for s in split_counts
-    ):
+    if not isinstance(split_counts, dict) or not all(isinstance(s, str) and s.isidentifier() for s in split_counts):
         raise DatasetError(f"{meta_path}: 'splits' must map split names to path counts")
     arrays = {split: _read_split(path / f"{split}.npz") for split in split_counts}
     digest = content_hash(arrays)
@@ -383,9 +373,7 @@ def load_dataset(path: str | os.PathLike, robot: RobotSpec | None = None) -> Dat
     for split, arr in arrays.items():
         file = path / f"{split}.npz"
         if arr["names"].shape[0] != split_counts[split]:
-            raise DatasetError(
-                f"{file}: has {arr['names'].shape[0]} paths, {META_FILE} says {split_counts[split]}"
-            )
+            raise DatasetError(f"{file}: has {arr['names'].shape[0]} paths, {META_FILE} says {split_counts[split]}")
         if arr["knots"].shape[0]:
             if m is not None and arr["knots"].shape[1] != m:
                 raise DatasetError(f"{file}: {arr['knots'].shape[1]} joints, other splits have {m}")
@@ -450,9 +438,7 @@ def read_cache(dataset: Dataset, split: str, knots: KnotStrategy) -> list[np.nda
     return list(cached.knots)
 
 
-def apply_strategy(
-    dataset: Dataset, split: str, knots: KnotStrategy, use_cache: bool = True
-) -> list[np.ndarray]:
+def apply_strategy(dataset: Dataset, split: str, knots: KnotStrategy, use_cache: bool = True) -> list[np.ndarray]:
     """The split's knots after `knots` (resampling), cached in ``<dataset>/.cache/``."""
     if split not in dataset.splits:
         raise DatasetError(f"{dataset.path}: no split {split!r} (has {sorted(dataset.splits)})")

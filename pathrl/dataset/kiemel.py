@@ -113,14 +113,12 @@ def import_kiemel(
         files = sorted(d.glob("episode_*.json"))
         splits[split] = [(f.stem, read_episode(f, robot.path_dof)) for f in files]
     if not any(splits.values()):
-        raise DatasetError(
-            f"{src}: no episode_*.json files found (looked in {', '.join(map(str, layout.values()))})"
-        )
+        raise DatasetError(f"{src}: no episode_*.json files found (looked in {', '.join(map(str, layout.values()))})")
     cfg_path, cfg = find_spline_config(src)
     stats = {s: {"stored": dataset_stats([k for _, k in p])} for s, p in splits.items()}
     meta = {
         "robot": robot.name,
-        "kind": kind or src.name,
+        "kind": kind or (src.parent.name if src.name in ("train", "test") else src.name),
         "path_joints": list(robot.path_joints),
         "seed": None,
         "generator": {"format": "kiemel-json", "src_dir": str(src.resolve())},

@@ -53,12 +53,14 @@ class ReferenceTrackingEnv:
     def __init__(self, robot: RobotSpec, path: ReferencePath, start_s: float, end_knot: int,
                  reward_terms: list[RewardTerm], knot_gap: float, n_state: int = 9, dt: float = 0.1,
                  substeps: int = 8, budget_steps: int = 160, stop_tolerance: float = 0.01,
-                 stop_bonus: bool = True, max_deviation: float | None = None, braking=None) -> None:
+                 stop_bonus: bool = True, max_deviation: float | None = None, braking=None,
+                 knot_obs: str = "relative") -> None:
         self.robot, self.path, self.terms = robot, path, reward_terms
         self.dt, self.substeps, self.n_state = dt, substeps, n_state
         self.knot_gap, self.horizon = knot_gap, (n_state - 1) * knot_gap
         self.budget, self.stop_tol, self.stop_bonus, self.max_dev = budget_steps, stop_tolerance, stop_bonus, max_deviation
         self.braking_law = braking
+        self.knot_obs = knot_obs
         self.limiter = PosVelJerkLimitation(
             time_step=dt, pos_limits=robot.pos_limits.copy(),
             vel_limits=np.stack([-robot.vel_limits, robot.vel_limits], 1),
@@ -95,7 +97,10 @@ class ReferenceTrackingEnv:
         lo, hi = self.robot.pos_limits[:, 0], self.robot.pos_limits[:, 1]
         parts = [2 * (self.pos - lo) / (hi - lo) - 1, self.vel / self.robot.vel_limits, self.acc / self.robot.acc_limits]
         plo, phi = lo[self.pi], hi[self.pi]
-        parts.append((2 * (self.window_knots - plo) / (phi - plo) - 1).ravel())
+        if self.knot_obs == "relative":
+            parts.append(((self.window_knots - self.pos[self.pi]) / self.horizon).ravel())
+        else:
+            parts.append((2 * (self.window_knots - plo) / (phi - plo) - 1).ravel())
         d0 = self.window_s[0]
         parts.append([2 * (self.s - d0) / self.knot_gap - 1])
         ahead = 2 * (self.window_s - d0) / self.horizon - 1

@@ -4,6 +4,9 @@ MDP (paper, Sec. III; original_pathtracking.md 3-7):
   state   commanded joint position / velocity / acceleration (normalized), the knot window
           (N knots: the knot at/behind the robot and N-1 ahead), the position inside the current knot
           interval, the path length covered by the window, the distance of each window knot.
+          Knots are given relative to the robot's position by default (``knot_obs=relative``: the
+          policy sees the direction to each knot directly, which trains much faster); the paper's
+          absolute knot positions are ``knot_obs=absolute``.
   action  one value in [-1, 1] per joint, mapped into the valid acceleration range for the end of the
           next 0.1 s step (jerk/acceleration/velocity/position limits, braking stays possible).
   reward  sum of weighted terms (pathrl.envs.rewards): path length R_l and deviation R_d (+ task terms).
@@ -64,6 +67,7 @@ class TrackingEnvCfg:
     stop_bonus: bool = True
     knot_gap_norm: float | None = None  # D (rad); default: the path set's largest knot gap
     n_state: int = 9  # knots in the observation
+    knot_obs: str = "relative"  # knots as seen from the robot (relative) or in joint space (absolute, paper)
     autoreset: bool = True
 
 
@@ -98,6 +102,8 @@ class PathTrackingEnv(_VecEnvBase):
         w = torch.as_tensor(robot.deviation_weights, dtype=torch.float64, device=self.device)
         self.dev_weights = w * math.sqrt(len(w) / float((w**2).sum()))
         self.max_episode_length = int(math.ceil(cfg.episode_budget_s / cfg.dt)) + 1
+        if cfg.knot_obs not in ("relative", "absolute"):
+            raise ValueError(f"env.knot_obs must be relative or absolute, got {cfg.knot_obs!r}")
 
         f64 = dict(dtype=torch.float64, device=self.device)
         d = robot.dof
@@ -205,7 +211,10 @@ class PathTrackingEnv(_VecEnvBase):
         acc_n = self.acc / lim.acc
         knots, ks = self.paths.window(self.seg_path, self.s, self.end_knot, self.cfg.n_state)
         plo, phi = lo[self.path_index], hi[self.path_index]
-        knots_n = (2.0 * (knots - plo) / (phi - plo) - 1.0).flatten(1)
+        if self.cfg.knot_obs == "relative":  # translation invariant: the direction and distance to each knot
+            knots_n = ((knots - self.pos[:, self.path_index].unsqueeze(1)) / self.horizon).flatten(1)
+        else:
+            knots_n = (2.0 * (knots - plo) / (phi - plo) - 1.0).flatten(1)
         d0 = ks[:, :1]
         self.l_obs = ks[:, -1]
         self.close_to_end = ks[:, -1] >= self.end_s

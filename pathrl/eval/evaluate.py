@@ -88,7 +88,9 @@ def evaluate(
     if episodes is None:
         episodes = paths.num_paths if segments == "full" else 1200
     plan = evaluation_plan(paths, episodes, segments, seed)
-    gap = summary.get("knot_gap_norm") or cfg.get("knot_gap_norm")
+    gap = summary.get("knot_gap_norm")
+    if gap is None:  # runs killed before their first summary: D of the training split, as in training
+        gap = load_pathset(cfg["dataset"]["path"], "train", knots, robot=robot).max_knot_gap()
     env_cfg = replace(env_cfg_from(cfg, num_envs=min(num_envs, episodes), seed=seed, knot_gap_norm=gap),
                       autoreset=False, device="cpu")
     env = PathTrackingEnv(env_cfg, robot, paths, build_reward_terms(cfg["reward"]["terms"]))

@@ -62,19 +62,21 @@ def in_step_bound(s: Side, dt: float) -> Tensor:
 
     Inside the step ``p(t)`` is a cubic whose local maximum touches ``pmax`` (with ``v = 0``) at a time
     ``tau`` solving ``a0*tau**2 + 4*v0*tau - 6*(pmax - p0) = 0``; then
-    ``x = a0 - 2*dt*(v0 + a0*tau)/tau**2``. Both roots are tried, the smallest valid ``x`` wins;
-    ``+inf`` where no interior maximum can reach the limit.
+    ``x = a0 - 2*dt*(v0 + a0*tau)/tau**2``. Both roots are tried (computed without cancellation, also
+    for ``p0 == pmax``), the smallest valid ``x`` wins; ``+inf`` where no interior maximum can reach
+    the limit.
     """
     room = (s.pmax - s.p).clamp_min(0.0)
     disc = 4.0 * s.v * s.v + 6.0 * s.a * room
-    root = torch.sqrt(disc.clamp_min(0.0))
+    q = -(2.0 * s.v + torch.where(s.v >= 0.0, 1.0, -1.0) * torch.sqrt(disc.clamp_min(0.0)))
     best = torch.full_like(s.p, float("inf"))
-    for tau in (6.0 * room / (root + 2.0 * s.v), 6.0 * room / (2.0 * s.v - root)):
+    for tau in (q / s.a, -6.0 * room / q):
         x = s.a - 2.0 * dt * (s.v + s.a * tau) / tau**2
         turning = s.a + (x - s.a) * tau / dt < 0.0  # a local maximum, not a minimum
         valid = (disc >= 0.0) & (tau > 0.0) & (tau < dt) & turning & (x < best)
         best = torch.where(valid, x, best)
-    return best
+    # At the limit and moving out of it: no acceleration helps (the tangency time shrinks to 0).
+    return torch.where((room == 0.0) & (s.v > 1e-9), -float("inf"), best)
 
 
 def greedy_peak(x: Tensor, s: Side, dt: float) -> Peak:
@@ -190,30 +192,131 @@ def descend(fn: PeakFn, x: Tensor, s: Side, dt: float, tol: float = 1e-13, max_i
     return out
 
 
-def greedy_bound(s: Side, dt: float, probe: Tensor, settle: float) -> tuple[Tensor, Tensor, Peak]:
+def hold_root(s: Side, dt: float, ramp: Tensor) -> tuple[Tensor, Tensor]:
+    """Root ``x`` if the greedy peak lay in the hold phase with ``ramp`` full-jerk knots; and ``v_h``.
+
+    With the ramp structure fixed, position and velocity where ``-amax`` starts to be held are affine
+    in ``x``, so ``p_h + v_h**2/(2*amax) = pmax`` is a quadratic (larger root). Consistent (the actual
+    root) where ``v_h > 0`` and ``x`` has that ramp structure. Returns ``(x, v_h(x))``.
+    """
+    tr = ramp * dt
+
+    def hold_state(x: float) -> tuple[Tensor, Tensor]:
+        v1 = s.v + 0.5 * (s.a + x) * dt
+        p1 = s.p + s.v * dt + (s.a / 3.0 + x / 6.0) * dt * dt
+        a_r = x - s.jmax * tr
+        v_r = v1 + x * tr - 0.5 * s.jmax * tr**2
+        p_r = p1 + v1 * tr + 0.5 * x * tr**2 - s.jmax * tr**3 / 6.0
+        return p_r + v_r * dt + (a_r / 3.0 - s.amax / 6.0) * dt * dt, v_r + 0.5 * (a_r - s.amax) * dt
+
+    (pz, vz), (po, vo) = hold_state(0.0), hold_state(1.0)
+    dp, dv = po - pz, vo - vz
+    qa, qb, qc = dv**2 / (2.0 * s.amax), dp + vz * dv / s.amax, pz + vz**2 / (2.0 * s.amax) - s.pmax
+    x = (-qb + torch.sqrt((qb * qb - 4.0 * qa * qc).clamp_min(0.0))) / (2.0 * qa)
+    return x, vz + dv * x
+
+
+def bracket_below(fn: PeakFn, hi: Tensor, s: Side, dt: float, xtol: float = 1e-7,
+                  max_iter: int = 16) -> Tensor:
+    """Largest ``x <= hi`` found with ``fn(x).value <= pmax`` for a peak that may jump; (M,) -> (M,).
+
+    ``fn(hi)`` must exceed ``pmax``. Steps down (doubling) until the peak is below the limit, then
+    shrinks the bracket by regula falsi (Illinois variant) with a bisection fallback; returns the safe
+    end once the bracket is narrower than ``xtol * (1 + |x|)`` (physical units of ``x``) or after
+    ``max_iter`` shrinking steps (the rare elements where the peak jumps then get a slightly lower,
+    still safe bound).
+    """
+    value, slope = fn(hi, s, dt)
+    r_hi = value - s.pmax
+    step = r_hi / slope
+    lo = hi - step
+    r_lo = fn(lo, s, dt)[0] - s.pmax
+    for _ in range(max_iter):
+        bad = r_lo > 0.0
+        if not bool(bad.any()):
+            break
+        step = torch.where(bad, 2.0 * step, step)
+        hi, r_hi = torch.where(bad, lo, hi), torch.where(bad, r_lo, r_hi)
+        lo = torch.where(bad, hi - step, lo)
+        r_lo = torch.where(bad, fn(lo, s, dt)[0] - s.pmax, r_lo)
+    out = lo.clone()
+    idx = torch.arange(lo.numel(), device=lo.device)
+    keep_hi = torch.zeros_like(lo, dtype=torch.bool)  # Illinois: which end was kept last time
+    keep_lo = torch.zeros_like(keep_hi)
+    for _ in range(max_iter):
+        open_ = (hi - lo) > xtol * (1.0 + lo.abs())
+        if not bool(open_.any()):
+            break
+        sel = open_.nonzero().squeeze(-1)
+        idx, s, lo, hi, r_lo, r_hi, keep_hi, keep_lo = (
+            idx[sel], s.take(sel), lo[sel], hi[sel], r_lo[sel], r_hi[sel], keep_hi[sel], keep_lo[sel])
+        w_hi = torch.where(keep_hi, 0.5, 1.0) * r_hi
+        w_lo = torch.where(keep_lo, 0.5, 1.0) * r_lo
+        x = hi - w_hi * (hi - lo) / (w_hi - w_lo)
+        x = torch.where((x > lo) & (x < hi), x, 0.5 * (lo + hi))
+        r = fn(x, s, dt)[0] - s.pmax
+        up = r > 0.0
+        hi, r_hi = torch.where(up, x, hi), torch.where(up, r, r_hi)
+        lo, r_lo = torch.where(up, lo, x), torch.where(up, r_lo, r)
+        keep_hi, keep_lo = ~up, up
+        out[idx] = lo
+    return out
+
+
+def greedy_root(s: Side, dt: float, probe: Tensor, tol: float = 1e-13) -> Tensor:
+    """Root of ``greedy_peak(x) = pmax`` below ``probe`` (where the peak at ``probe`` exceeds ``pmax``).
+
+    Closed form where the peak lies in the hold phase (one quadratic per ramp structure, accepted when
+    consistent); otherwise Newton's method, started from the hold candidate of the shortest structure
+    (for a convex function Newton converges from either side of the root).
+    """
+    root = probe.clone()
+    done = torch.zeros_like(probe, dtype=torch.bool)
+    start = probe.clone()
+    most = int(torch.floor((probe + s.amax) / (s.jmax * dt)).clamp_min(0.0).max().item())
+    for m in range(most + 1):
+        x, v_h = hold_root(s, dt, torch.full_like(probe, float(m)))
+        fits = (v_h > 0.0) & (torch.floor((x + s.amax) / (s.jmax * dt)).clamp_min(0.0) == m) & (x <= probe)
+        found = ~done & fits
+        root = torch.where(found, x, root)
+        done |= found
+        if m == 0:
+            start = torch.where(x.isfinite() & (x < probe), x, probe)
+    todo = (~done).nonzero().squeeze(-1)
+    if todo.numel():
+        root[todo] = descend(_greedy_fn, start[todo], s.take(todo), dt, tol)
+    return root
+
+
+def greedy_bound(s: Side, dt: float, probe: Tensor, settle: float,
+                 aware: Tensor) -> tuple[Tensor, Tensor, Tensor, Peak]:
     """Position bounds after the step: klimits' greedy root and the velocity-aware (safe) one.
 
-    Elements whose greedy peak at ``probe`` stays below ``pmax`` get ``+inf`` (the bound is higher than
-    anything the caller cares about). Returns ``(greedy, safe, peak at greedy)``.
+    Only elements whose greedy peak at ``probe`` exceeds ``pmax`` are solved (``idx``); the others do not
+    constrain anything the caller cares about. ``aware`` marks elements whose velocity floor can exceed
+    ``-amax`` (only those can need the velocity-aware correction). Returns ``(idx, greedy, safe, peak)``,
+    the last three for ``idx`` only (peak at the greedy root).
     """
-    peak = greedy_peak(probe, s, dt)
-    greedy = torch.full_like(probe, float("inf"))
-    safe = greedy.clone()
-    idx = (peak.value > s.pmax).nonzero().squeeze(-1)
-    if idx.numel() == 0:
-        return greedy, safe, peak
+    idx = (greedy_peak(probe, s, dt).value > s.pmax).nonzero().squeeze(-1)
     sub = s.take(idx)
-    root = descend(_greedy_fn, probe[idx], sub, dt)
-    at_root = greedy_peak(root, sub, dt)
-    fixed = root.clone()
-    lifted = velocity_aware_peak(root, sub, dt, at_root, settle) > sub.pmax + 1e-13
-    jdx = lifted.nonzero().squeeze(-1)
-    if jdx.numel():
-        fixed[jdx] = descend(_aware_fn(settle), root[jdx], sub.take(jdx), dt)
-    greedy[idx], safe[idx] = root, fixed
-    for f in fields(peak):
-        getattr(peak, f.name)[idx] = getattr(at_root, f.name).to(getattr(peak, f.name).dtype)
-    return greedy, safe, peak
+    if idx.numel() == 0:
+        empty = probe[idx]
+        return idx, empty, empty, greedy_peak(empty, sub, dt)
+    root = greedy_root(sub, dt, probe[idx])
+    peak = greedy_peak(root, sub, dt)
+    safe = root.clone()
+    check = aware[idx].nonzero().squeeze(-1)
+    if check.numel():
+        sc = sub.take(check)
+        lifted = velocity_aware_peak(root[check], sc, dt, _take_peak(peak, check), settle) > sc.pmax + 1e-13
+        jdx = check[lifted]
+        if jdx.numel():
+            safe[jdx] = bracket_below(_aware_fn(settle), root[jdx], sub.take(jdx), dt)
+    return idx, root, safe, peak
+
+
+def _take_peak(peak: Peak, idx: Tensor) -> Peak:
+    return Peak(*(getattr(peak, f.name)[idx] for f in fields(peak)))
 
 
 def _greedy_fn(x: Tensor, s: Side, dt: float) -> tuple[Tensor, Tensor]:
@@ -229,24 +332,36 @@ def _aware_fn(settle: float) -> PeakFn:
     return fn
 
 
+def _ramp_reach(v: Tensor, a: Tensor, amax: Tensor, jmax: Tensor) -> Tensor:
+    """Largest displacement ahead for a continuous full-jerk ramp from ``a`` onto ``-amax``, then held."""
+    tr = (a + amax).clamp_min(0.0) / jmax
+    u = last_down_crossing(v, a, jmax)
+    in_ramp = (u >= 0.0) & (u <= tr)
+    u = torch.where(in_ramp, u, tr)
+    v_r = v + a * u - 0.5 * jmax * u * u
+    reach = v * u + 0.5 * a * u * u - jmax * u**3 / 6.0
+    return (reach + torch.where(in_ramp, 0.0, v_r.clamp_min(0.0) ** 2 / (2.0 * amax))).clamp_min(0.0)
+
+
 def reach_top(p0: Tensor, v0: Tensor, a0: Tensor, amax: Tensor, jmax: Tensor, dt: float,
               x_probe: Tensor) -> Tensor:
     """Upper bound on the greedy braking peak for every end acceleration ``x <= x_probe`` (cheap).
 
-    Uses a profile lying above the greedy one: ``max(a0, x)`` during the step, ``x`` during the next,
-    then the continuous full-jerk ramp from ``x`` onto ``-amax`` and ``-amax`` held.
+    Exact for the step and the next one (knot ``max(x - jmax*dt, -amax)``); from there a profile
+    lying above the greedy one: that knot held for one more step, then the continuous full-jerk
+    ramp onto ``-amax`` and ``-amax`` held.
     """
-    s1 = torch.maximum(a0, x_probe)
-    v1 = v0 + s1 * dt
-    p1 = p0 + v0 * dt + 0.5 * s1 * dt * dt
-    v2 = v1 + x_probe * dt
-    p2 = p1 + v1 * dt + 0.5 * x_probe * dt * dt
-    tr = (x_probe + amax).clamp_min(0.0) / jmax
-    u = last_down_crossing(v2, x_probe, jmax)
-    in_ramp = (u >= 0.0) & (u <= tr)
-    u = torch.where(in_ramp, u, tr)
-    v_r = v2 + x_probe * u - 0.5 * jmax * u * u
-    reach = p2 + v2 * u + 0.5 * x_probe * u * u - jmax * u**3 / 6.0
-    reach = reach + torch.where(in_ramp, 0.0, v_r.clamp_min(0.0) ** 2 / (2.0 * amax))
-    step_top = p0 + v0.clamp_min(0.0) * dt + 0.5 * s1.clamp_min(0.0) * dt * dt
-    return torch.maximum(torch.maximum(reach, torch.maximum(p1, p2)), step_top)
+    x = x_probe
+    g2 = torch.maximum(x - jmax * dt, -amax)
+    p1 = p0 + v0 * dt + (a0 / 3.0 + x / 6.0) * dt * dt
+    v1 = v0 + 0.5 * (a0 + x) * dt
+    p2 = p1 + v1 * dt + (x / 3.0 + g2 / 6.0) * dt * dt
+    v2 = v1 + 0.5 * (x + g2) * dt
+    top1 = p0 + v0.clamp_min(0.0) * dt + 0.5 * torch.maximum(a0, x).clamp_min(0.0) * dt * dt
+    top2 = p1 + v1.clamp_min(0.0) * dt + 0.5 * x.clamp_min(0.0) * dt * dt
+    p3 = p2 + v2 * dt + 0.5 * g2 * dt * dt
+    v3 = v2 + g2 * dt
+    stops = (g2 < 0.0) & (v2 > 0.0) & (v3 <= 0.0)  # velocity reaches zero while g2 is held
+    top3 = torch.where(stops, p2 + v2 * v2 / (-2.0 * g2).clamp_min(1e-300), p3 + _ramp_reach(v3, g2, amax, jmax))
+    top3 = torch.where((v2 <= 0.0) & (g2 <= 0.0), p2, top3)
+    return torch.maximum(torch.maximum(top1, top2), torch.maximum(torch.maximum(p1, p2), top3))

@@ -12,7 +12,7 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
-from pathrl.limits._braking import Peak, Side
+from pathrl.limits._braking import Peak, Side, hold_root
 
 
 def knot_stop_bound(s: Side, dt: float, peak: Peak) -> Tensor:
@@ -91,22 +91,7 @@ def _solve(s: Side, dt: float, stop: Tensor, turn: Tensor, ramp: Tensor) -> Tens
 def _hold_hypothesis_time(s: Side, dt: float, ramp: Tensor) -> Tensor:
     """Peak time (from the step start) if the greedy peak were in the hold, ramp structure fixed.
 
-    With ``m = ramp`` fixed, position and velocity at the start of the hold are affine in ``x``, so
-    ``p_h + v_h**2/(2*amax) = pmax`` is a quadratic. klimits picks the stop knot from this time also
-    when the actual peak lies in the reduced-jerk step.
+    klimits picks the stop knot from this time also when the actual peak lies in the reduced-jerk step.
     """
-    tr = ramp * dt
-
-    def hold_state(x: float) -> tuple[Tensor, Tensor]:
-        v1 = s.v + 0.5 * (s.a + x) * dt
-        p1 = s.p + s.v * dt + (s.a / 3.0 + x / 6.0) * dt * dt
-        a_r = x - s.jmax * tr
-        v_r = v1 + x * tr - 0.5 * s.jmax * tr**2
-        p_r = p1 + v1 * tr + 0.5 * x * tr**2 - s.jmax * tr**3 / 6.0
-        return p_r + v_r * dt + (a_r / 3.0 - s.amax / 6.0) * dt * dt, v_r + 0.5 * (a_r - s.amax) * dt
-
-    (pz, vz), (po, vo) = hold_state(0.0), hold_state(1.0)
-    dp, dv = po - pz, vo - vz
-    qa, qb, qc = dv**2 / (2.0 * s.amax), dp + vz * dv / s.amax, pz + vz**2 / (2.0 * s.amax) - s.pmax
-    x = (-qb + torch.sqrt((qb * qb - 4.0 * qa * qc).clamp_min(0.0))) / (2.0 * qa)
-    return 2.0 * dt + tr + (vz + dv * x) / s.amax
+    _, v_h = hold_root(s, dt, ramp)
+    return 2.0 * dt + ramp * dt + v_h / s.amax

@@ -13,14 +13,18 @@ The range reproduces ``klimits.PosVelJerkLimitation`` (1.1.3) with the settings 
 * velocity: the acceleration must be rampable to zero with full jerk before ``|v|`` exceeds the limit
   (TrueAdapt eqs. 11/12, with klimits' refinement that parks the ramp at ``-/+0.01*a_max`` on a knot);
 * position: the lowest possible braking trajectory ("greedy": full jerk down, reduced jerk onto
-  ``-a_max``, hold) must peak at or before the limit; this is exact (Newton's method on a convex
-  function, or closed form inside the step). klimits then additionally asks the braking to end with
-  ``v = 0`` on a decision step (knot) at the limit, which can only shrink the range;
-* klimits' conflict resolution (drop jerk, then velocity, if the ranges do not overlap) and the final
-  clip to ``[-a_max, a_max]``.
+  ``-a_max``, hold) must peak at or before the limit. This is solved exactly (closed form inside the
+  step and for a peak in the hold phase, Newton's method on a convex function otherwise), where
+  klimits' closed forms sometimes pick a wrong branch. Where klimits' own velocity rule forbids
+  holding ``-a_max`` through the step in which the velocity reaches zero, that knot is raised
+  ("velocity-aware"; klimits does not, and then steers into states where a limit must break);
+* klimits' refinement that braking should end with ``v = 0`` on a decision step at the limit, which
+  only shrinks the range;
+* conflict resolution for states outside the valid set, and the final clip to ``[-a_max, a_max]``.
 
-Differences to klimits are confined to corner cases of its internal root finding; see
-``tests/test_limits.py`` for the measured agreement.
+Work is spent only where a limit can bind: cheap per-element bounds skip the rest. Agreement with
+klimits is measured in ``tests/test_limits.py``; safety of whole trajectories in
+``tests/test_limits_property.py``.
 """
 
 from __future__ import annotations
@@ -33,13 +37,14 @@ from torch import Tensor
 
 from pathrl.limits._braking import Side, greedy_bound, in_step_bound, reach_top
 from pathrl.limits._knot import knot_stop_bound
-from pathrl.limits._velocity import velocity_bound, velocity_emergency
+from pathrl.limits._velocity import velocity_bound, velocity_emergency, velocity_floor
 
 DEFAULT_DT = 0.1
 SETTLE_FACTOR = 0.01  # klimits acceleration_after_max_vel_limit_factor of the original work
 CONFLICT_TOL = 1e-3  # klimits: ranges overlapping by less than this count as conflicting
 OUTSIDE_TOL = 1e-9  # positions this far beyond a limit are rounding (stops end exactly on the limit)
-KNOT_SLACK = 0.5  # the knot refinement lowers the greedy bound by less than this times acc (~0.2 seen)
+KNOT_SLACK = 0.3  # the knot refinement lowers the greedy bound by less than this times acc (<0.2 seen)
+VEL_SKIP_MARGIN = 0.25  # see _velocity_side
 PLAN_MARGIN = 1e-10  # braking plans stop this far (rad or m) inside the limit; absorbs rounding
 
 
@@ -107,30 +112,51 @@ def valid_acceleration_range(p: Tensor, v: Tensor, a: Tensor, limits: JointLimit
     Returns:
         ``(a_min, a_max)``, each (N, D), physical units, ``a_min <= a_max``, within ``[-acc, acc]``.
     """
-    return _valid_range(p, v, a, limits, dt, stop_at_knot=True)
+    lo, hi, _ = _valid_range(p, v, a, limits, dt, stop_at_knot=True)
+    return lo, hi
 
 
 def _valid_range(p: Tensor, v: Tensor, a: Tensor, limits: JointLimits, dt: float,
-                 stop_at_knot: bool) -> tuple[Tensor, Tensor]:
-    """:func:`valid_acceleration_range`; ``stop_at_knot=False`` drops klimits' stop-on-a-knot refinement
-    (the result then equals klimits with ``set_velocity_after_max_pos_to_zero=False``; only for tests,
-    it is not safe for joints whose velocity limit is small against ``acc*dt``)."""
+                 stop_at_knot: bool) -> tuple[Tensor, Tensor, Tensor]:
+    """:func:`valid_acceleration_range` plus a (N, D) mask: the jerk, velocity and position ranges
+    overlap inside ``[-acc, acc]`` (no conflict had to be resolved; the state is in the valid set).
+
+    ``stop_at_knot=False`` drops klimits' stop-on-a-knot refinement and the velocity-aware braking (the
+    result then equals klimits with ``set_velocity_after_max_pos_to_zero=False``; tests only, it is not
+    safe in general).
+    """
     amax, jmax, vmax = limits.acc, limits.jerk, limits.vel
     # Side 0 bounds from above; side 1 is the mirrored joint, whose upper bound is minus the lower bound.
     p0, v0, a0 = torch.stack((p, -p)), torch.stack((v, -v)), torch.stack((a, -a))
-    pmax = torch.stack((limits.pos[:, 1], -limits.pos[:, 0])).unsqueeze(1).expand_as(p0)
+    pmax = torch.stack((limits.pos[:, 1], -limits.pos[:, 0])).unsqueeze(1)  # (2, 1, D)
     jerk_hi = a0 + jmax * dt
     vel_hi = _velocity_side(v0, a0, vmax, amax, jmax, dt)
     cap = torch.minimum(torch.minimum(jerk_hi, vel_hi), amax)
     pos_hi, knot_hi = _position_side(p0, v0, a0, pmax, limits, dt, cap, stop_at_knot)
-    lo, hi = _combine(jerk_hi, vel_hi, pos_hi, knot_hi)
-    return lo.clamp(-amax, amax), hi.clamp(-amax, amax)
+    lo, hi, overlap = _combine(jerk_hi, vel_hi, pos_hi, knot_hi)
+    overlap &= (hi >= -amax) & (lo <= amax)
+    return lo.clamp(-amax, amax), hi.clamp(-amax, amax), overlap
 
 
 def _velocity_side(v0: Tensor, a0: Tensor, vmax: Tensor, amax: Tensor, jmax: Tensor, dt: float) -> Tensor:
-    """(2, N, D) velocity upper bound per side, with klimits' emergency overrides."""
-    bound = velocity_bound(v0, a0, vmax, amax, jmax, dt, SETTLE_FACTOR)
-    urgent = velocity_emergency(v0, a0, vmax, amax, dt)
+    """(2, N, D) velocity upper bound per side (+inf where it cannot bind), klimits' emergency overrides.
+
+    The bound depends on the state only through ``c = v0 + a0*dt/2`` (until ``c`` reaches the limit)
+    and falls with ``c``; it is at least ``amax`` for ``c <= vmax - (amax*dt + amax**2/jmax)/2`` minus a
+    margin of ``VEL_SKIP_MARGIN*amax*dt`` (the settling knot lowers it by < 0.08*amax*dt). Only the
+    other elements are evaluated.
+    """
+    c = v0 + 0.5 * dt * a0
+    skip_below = vmax - 0.5 * (amax * dt + amax * amax / jmax) - VEL_SKIP_MARGIN * amax * dt
+    bound = torch.full_like(v0, float("inf"))
+    urgent = torch.zeros_like(v0, dtype=torch.bool)
+    idx = (c > skip_below).reshape(-1).nonzero().squeeze(-1)
+    if idx.numel():
+        joint = idx % v0.shape[-1]
+        vs, as_ = v0.reshape(-1)[idx], a0.reshape(-1)[idx]
+        lim = (vmax[joint], amax[joint], jmax[joint])
+        bound.view(-1)[idx] = velocity_bound(vs, as_, *lim, dt, SETTLE_FACTOR)
+        urgent.view(-1)[idx] = velocity_emergency(vs, as_, lim[0], lim[1], dt)
     bound = torch.where(urgent.flip(0), amax, bound)  # the other side must brake: klimits leaves +acc here
     return torch.where(urgent, -amax, bound)
 
@@ -151,9 +177,11 @@ def _position_side(p0: Tensor, v0: Tensor, a0: Tensor, pmax: Tensor, limits: Joi
     near = ((pmax - p0) <= radius).reshape(-1).nonzero().squeeze(-1)
     if near.numel() == 0:
         return safe, knot
-    flat = [t.expand(shape).reshape(-1)[near] for t in (p0, v0, a0, pmax, amax, jmax, vmax, cap)]
-    s, cap = Side(*flat[:7]), flat[7]
-    probe = cap + KNOT_SLACK * s.amax
+    joint = near % shape[-1]
+    side = near // (shape[-1] * shape[-2])
+    s = Side(*(t.reshape(-1)[near] for t in (p0, v0, a0)), pmax[side, 0, joint], amax[joint], jmax[joint],
+             vmax[joint])
+    probe = cap.reshape(-1)[near] + KNOT_SLACK * s.amax
     keep = (reach_top(s.p, s.v, s.a, s.amax, s.jmax, dt, probe) >= s.pmax - 1e-9).nonzero().squeeze(-1)
     if keep.numel() == 0:
         return safe, knot
@@ -167,25 +195,34 @@ def _position_subset(s: Side, dt: float, probe: Tensor, stop_at_knot: bool) -> t
     """Safe (velocity-aware greedy) and knot-refined bounds for a flat subset of elements."""
     inside = in_step_bound(s, dt)
     s.pmax = s.pmax - PLAN_MARGIN  # plans end slightly inside, so the next in-step check has slack
-    greedy, safe, peak = greedy_bound(s, dt, probe, SETTLE_FACTOR)
+    floor_at_rest = velocity_floor(torch.zeros_like(s.v), -s.amax, s.vmax, s.amax, s.jmax, dt, SETTLE_FACTOR)
+    idx, greedy, safe, peak = greedy_bound(s, dt, probe, SETTLE_FACTOR, aware=floor_at_rest > -s.amax)
+    after = torch.full_like(probe, float("inf"))
+    plain, after_safe = after.clone(), after.clone()
+    plain[idx], after_safe[idx] = greedy, safe
     outside = s.p > s.pmax + PLAN_MARGIN + OUTSIDE_TOL  # klimits: reach the limit at the step end
     recover = 6.0 * (s.pmax - s.p - s.v * dt) / dt**2 - 2.0 * s.a
-    safe = torch.where(outside, recover, torch.minimum(inside, safe))
-    if not stop_at_knot:
-        return torch.where(outside, recover, torch.minimum(inside, greedy)), safe
+    plain = torch.where(outside, recover, torch.minimum(inside, plain))
+    if not stop_at_knot:  # klimits with set_velocity_after_max_pos_to_zero=False (tests only)
+        return plain, plain
+    safe_all = torch.where(outside, recover, torch.minimum(inside, after_safe))
     # klimits' refinement follows the greedy peak after the step even where the in-step bound is tighter.
-    knot = torch.minimum(knot_stop_bound(s, dt, peak), safe)
-    return safe, torch.where(outside, safe, knot)
+    knot = torch.full_like(probe, float("inf"))
+    knot[idx] = knot_stop_bound(s.take(idx), dt, peak)
+    return safe_all, torch.where(outside, safe_all, torch.minimum(knot, safe_all))
 
 
-def _combine(jerk_hi: Tensor, vel_hi: Tensor, pos_hi: Tensor, knot_hi: Tensor) -> tuple[Tensor, Tensor]:
-    """Intersect the (2, N, D) per-side upper bounds; returns (lo, hi) in joint coordinates.
+def _combine(jerk_hi: Tensor, vel_hi: Tensor, pos_hi: Tensor, knot_hi: Tensor
+             ) -> tuple[Tensor, Tensor, Tensor]:
+    """Intersect the (2, N, D) per-side upper bounds; returns (lo, hi, overlap) in joint coordinates.
 
     Like klimits: the stop-on-a-knot position range replaces the plain one unless it is empty (by
-    more than ``CONFLICT_TOL``). If jerk, velocity and position ranges do not overlap, klimits drops the
-    jerk range, then the velocity range, and returns the rest. Such states lie outside the valid set
-    (they are never reached from inside it); here the result is instead the single point of the
-    remaining range closest to the dropped one, which violates the dropped limit as little as possible.
+    more than ``CONFLICT_TOL``). If the jerk, velocity and position ranges do not overlap (a state
+    outside the valid set; never reached from inside it), klimits drops the jerk range, then the
+    velocity range. Here the jerk range is dropped first as well, but then the position range: a
+    velocity violation forced by an unreachable position bound snowballs (seen with jerk/acc ratios
+    of 10/s), while a small position excess does not. The remaining range is reduced to its point
+    closest to the dropped one.
     """
     lo_k, hi_k = -knot_hi[1], knot_hi[0]
     crossed = lo_k > hi_k
@@ -193,16 +230,18 @@ def _combine(jerk_hi: Tensor, vel_hi: Tensor, pos_hi: Tensor, knot_hi: Tensor) -
     refine = lo_k - hi_k < CONFLICT_TOL
     lo_p = torch.where(refine, torch.where(crossed, mid, lo_k), -pos_hi[1])
     hi_p = torch.where(refine, torch.where(crossed, mid, hi_k), pos_hi[0])
-    lo_vp = torch.maximum(-vel_hi[1], lo_p)
-    hi_vp = torch.minimum(vel_hi[0], hi_p)
-    bad_vp = lo_vp - hi_vp > CONFLICT_TOL  # velocity against position: keep position
-    lo_vp = torch.where(bad_vp, torch.where(lo_p > vel_hi[0], lo_p, hi_p), lo_vp)
+    lo_v, hi_v = -vel_hi[1], vel_hi[0]
+    lo_j, hi_j = -jerk_hi[1], jerk_hi[0]
+    lo = torch.maximum(torch.maximum(lo_j, lo_v), lo_p)
+    hi = torch.minimum(torch.minimum(hi_j, hi_v), hi_p)
+    overlap = lo <= hi
+    lo_vp, hi_vp = torch.maximum(lo_v, lo_p), torch.minimum(hi_v, hi_p)
+    bad_vp = lo_vp - hi_vp > CONFLICT_TOL  # velocity against position: keep velocity
+    lo_vp = torch.where(bad_vp, torch.where(lo_p > hi_v, hi_v, lo_v), lo_vp)
     hi_vp = torch.where(bad_vp, lo_vp, hi_vp)
-    lo = torch.maximum(-jerk_hi[1], lo_vp)
-    hi = torch.minimum(jerk_hi[0], hi_vp)
     bad = lo - hi > CONFLICT_TOL  # jerk against the rest: keep the rest
-    lo = torch.where(bad, torch.where(lo_vp > jerk_hi[0], lo_vp, hi_vp), lo)
+    lo = torch.where(bad, torch.where(lo_vp > hi_j, lo_vp, hi_vp), lo)
     hi = torch.where(bad, lo, hi)
     mid = 0.5 * (lo + hi)
     crossed = lo > hi
-    return torch.where(crossed, mid, lo), torch.where(crossed, mid, hi)
+    return torch.where(crossed, mid, lo), torch.where(crossed, mid, hi), overlap

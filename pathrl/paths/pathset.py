@@ -71,7 +71,7 @@ class PathSet:
         shape = s.shape
         s2 = s.reshape(shape[0], -1).to(self.table.dtype)
         x = (s2 / self.table_step).clamp(min=0.0)
-        last = ((self.length[idx] / self.table_step)).to(self.table.dtype).unsqueeze(1)
+        last = (self.length[idx] / self.table_step).to(self.table.dtype).unsqueeze(1)
         x = torch.minimum(x, last)
         n_s = self.table.shape[1]
         i0 = x.floor().long().clamp(max=n_s - 2)

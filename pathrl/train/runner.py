@@ -43,6 +43,7 @@ def env_cfg_from(cfg: dict[str, Any], num_envs: int | None = None, seed: int | N
         stop_bonus=bool(e["stop_bonus"]),
         knot_gap_norm=knot_gap_norm,
         n_state=int(cfg["knots"]["n_state"]),
+        knot_obs=str(e.get("knot_obs", "relative")),
     )
 
 
@@ -122,6 +123,9 @@ def train(cfg: dict[str, Any], run_dir: Path, resume: bool = False) -> dict[str,
     os.replace(tmp, run_dir / "config.yaml")
 
     env = build_env(cfg, "train")
+    prev = json.loads((run_dir / "summary.json").read_text()) if (run_dir / "summary.json").exists() else {}
+    # The observation normalizer D must be known to evaluate the policy on any other path set.
+    write_json_atomic(run_dir / "summary.json", {**prev, "experiment": cfg["experiment"], "knot_gap_norm": env.knot_gap})
     train_cfg = rsl_train_cfg(cfg, run_dir)
     runner = PathRLRunner(env, train_cfg, log_dir=str(run_dir), device=cfg.get("device", "cpu"))
     done_before = 0
@@ -136,9 +140,6 @@ def train(cfg: dict[str, Any], run_dir: Path, resume: bool = False) -> dict[str,
         runner.learn(num_learning_iterations=remaining)
     wall = time.perf_counter() - t0
     steps_per_iter = int(train_cfg["num_steps_per_env"]) * env.num_envs
-    prev = {}
-    if (run_dir / "summary.json").exists():
-        prev = json.loads((run_dir / "summary.json").read_text())
     summary = {
         "experiment": cfg["experiment"],
         "iterations": total,
