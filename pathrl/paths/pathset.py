@@ -14,7 +14,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from pathrl.paths.spline import dedupe_knots, knot_arc_lengths, sample_uniform
+from pathrl.paths.spline import dedupe_knots, tabulate
 
 
 @dataclass(frozen=True)
@@ -137,9 +137,7 @@ def build_pathset(
         raise ValueError("all paths must have the same number of joints")
     tables, ks, lengths = [], [], []
     for k in knots_list:
-        table, length = sample_uniform(k, table_step)
-        s_k, _ = knot_arc_lengths(k)
-        s_k[-1] = length
+        table, s_k, length = tabulate(k, table_step)
         tables.append(table)
         ks.append(s_k)
         lengths.append(length)

@@ -58,6 +58,19 @@ def arc_length_table(spline: BSpline, knots: np.ndarray, step: float = ARC_LENGT
     return u, s
 
 
+def tabulate(knots: np.ndarray, step: float) -> tuple[np.ndarray, np.ndarray, float]:
+    """One spline fit, three views: positions at arc lengths 0, step, 2 step, ... and at L ((S, M)),
+    the arc length of every knot ((K,), last = L) and the length L."""
+    knots = dedupe_knots(knots)
+    spline = fit_spline(knots)
+    u, s = arc_length_table(spline, knots)
+    length = float(s[-1])
+    grid = np.r_[np.arange(0.0, length, step), length]
+    knot_s = np.interp(chord_params(knots), u, s)
+    knot_s[-1] = length
+    return spline(np.interp(grid, s, u)), knot_s, length
+
+
 def knot_arc_lengths(knots: np.ndarray) -> tuple[np.ndarray, float]:
     """Arc length of every knot along the path and the total length. (K, M) -> ((K,), L)."""
     knots = dedupe_knots(knots)
@@ -68,12 +81,8 @@ def knot_arc_lengths(knots: np.ndarray) -> tuple[np.ndarray, float]:
 
 def sample_uniform(knots: np.ndarray, step: float) -> tuple[np.ndarray, float]:
     """Path positions at arc lengths 0, step, 2 step, ... and at L. Returns ((S, M), L)."""
-    knots = dedupe_knots(knots)
-    spline = fit_spline(knots)
-    u, s = arc_length_table(spline, knots)
-    length = float(s[-1])
-    grid = np.r_[np.arange(0.0, length, step), length]
-    return spline(np.interp(grid, s, u)), length
+    table, _, length = tabulate(knots, step)
+    return table, length
 
 
 def _place_knots(spline: BSpline, u: np.ndarray, measure: np.ndarray, spacing: float) -> np.ndarray:

@@ -7,7 +7,6 @@ every iteration, so a killed run keeps everything up to its last finished iterat
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 from typing import Any
 
@@ -63,10 +62,5 @@ class McapLogWriter(LogWriter):
 
 
 def _salvage(path: Path) -> list[tuple[str, int, Any]]:
-    """Messages of an existing run.mcap (finished or not); the old file is replaced afterwards."""
-    if not path.exists():
-        return []
-    msgs = list(iter_messages(path))
-    os.replace(path, path.with_suffix(".mcap.prev"))
-    os.remove(path.with_suffix(".mcap.prev"))
-    return msgs
+    """Messages of an existing run.mcap (finished or not); the new writer then rewrites the file."""
+    return list(iter_messages(path)) if path.exists() else []

@@ -140,6 +140,7 @@ def train(cfg: dict[str, Any], run_dir: Path, resume: bool = False) -> dict[str,
         runner.learn(num_learning_iterations=remaining)
     wall = time.perf_counter() - t0
     steps_per_iter = int(train_cfg["num_steps_per_env"]) * env.num_envs
+    last_ckpt = latest_checkpoint(run_dir)
     summary = {
         "experiment": cfg["experiment"],
         "iterations": total,
@@ -148,7 +149,7 @@ def train(cfg: dict[str, Any], run_dir: Path, resume: bool = False) -> dict[str,
         "num_envs": env.num_envs,
         "steps_per_iteration": steps_per_iter,
         "knot_gap_norm": env.knot_gap,
-        "checkpoint": latest_checkpoint(run_dir).name if latest_checkpoint(run_dir) else None,
+        "checkpoint": last_ckpt.name if last_ckpt else None,
         "mean_reward": float(torch.tensor(list(runner.logger.rewbuffer)).mean()) if runner.logger.rewbuffer else None,
     }
     write_json_atomic(run_dir / "summary.json", summary)
