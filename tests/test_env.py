@@ -98,12 +98,13 @@ def test_replace_path_mid_episode():
     env.step(torch.zeros(2, env.num_actions))  # and keeps running
 
 
-def test_matches_numpy_reference_oracle():
+@pytest.mark.parametrize("end_obs", [False, True])
+def test_matches_numpy_reference_oracle(end_obs):
     """Same path, same actions: states, rewards and terminations of the batched env match the oracle.
 
     Tolerances: limits (torch vs klimits) and reference lookup (table vs spline) differ by < 1e-6.
     """
-    env, knots = make_env(num_envs=1, segments="full", episode_budget_s=30.0)
+    env, knots = make_env(num_envs=1, segments="full", episode_budget_s=30.0, end_obs=end_obs)
     robot = env.robot
     lim = JointLimits.from_robot(robot)
 
@@ -115,7 +116,8 @@ def test_matches_numpy_reference_oracle():
     env.start_segments(torch.tensor([0]), Segments(torch.tensor([0]), torch.zeros(1, dtype=torch.float64),
                                                    env.paths.length[[0]].clone(), env.paths.num_knots[[0]] - 1))
     ref = ReferenceTrackingEnv(robot, path, 0.0, len(path.knots) - 1, build_reward_terms(REWARD),
-                               knot_gap=env.knot_gap, budget_steps=int(env.budget[0]), braking=brake)
+                               knot_gap=env.knot_gap, budget_steps=int(env.budget[0]), braking=brake,
+                               end_obs=end_obs)
     rng = np.random.default_rng(0)
     np.testing.assert_allclose(env.get_observations()["policy"][0].numpy(), ref.observation(), atol=1e-5)
     for k in range(300):

@@ -5,9 +5,9 @@ joints: 150) decision steps; each step is integrated at 240 Hz (24 setpoints) an
 checked with :func:`pathrl.limits.check.limit_violations` at ``rtol = 1e-7`` (relative to the
 velocity, acceleration and jerk limit, and to the width of the position range). Exact arithmetic would
 give no excess at all; the worst seen is ~1e-8 (jerk), where a forced range ``[x, x]`` at the position
-boundary and the jerk bound differ by rounding and are averaged (klimits' rule). Action patterns: uniform, bang-bang, held
-extremes that switch now and then, and long alternating blocks of +-1 (the last three drive the joints
-into their limits again and again).
+boundary and the jerk bound differ by rounding and are averaged (klimits' rule). Action patterns: uniform,
+bang-bang, held extremes that switch now and then, and long alternating blocks of +-1 (the last three drive
+the joints into their limits again and again).
 
 Joints are the shipped robots' joints and, via hypothesis, robot-like random joints: limits of shipped
 joints scaled by 0.5..1.5 with jerk = (15..40) * acc (the shipped ratio is 20). Outside that domain

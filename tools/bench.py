@@ -153,7 +153,8 @@ def main() -> None:
     res["env_iiwa7"] = bench_env("iiwa7", n, sec)
     res["env_armar4_legs"] = bench_env("armar4_legs", n, sec)
     res["reference_iiwa7"] = bench_reference("iiwa7", sec)
-    res["batched_over_reference_iiwa7"] = res["env_iiwa7"]["env_steps_per_s"] / res["reference_iiwa7"]["env_steps_per_s"]
+    ref_rate = res["reference_iiwa7"]["env_steps_per_s"]
+    res["batched_over_reference_iiwa7"] = res["env_iiwa7"]["env_steps_per_s"] / ref_rate
     res["ppo_iteration_iiwa7"] = bench_ppo_iteration(n, 1 if args.quick else 3)
     res["decision_iiwa7"] = bench_decision("iiwa7")
     res["decision_armar4_legs"] = bench_decision("armar4_legs")
@@ -182,7 +183,8 @@ def _print(res: dict, out: Path) -> None:
     t.add_row(f"PPO iteration ({p['num_envs']} envs x {p['steps_per_env']} steps)", f"{p['s_per_iteration']:.2f} s")
     for k in ("decision_iiwa7", "decision_armar6", "decision_armar4_legs"):
         d = res[k]
-        t.add_row(f"policy + limits per decision, {d['robot']}", f"{d['mean_ms']:.2f} ms (max {d['max_pct_of_step']:.1f} % of 0.1 s)")
+        t.add_row(f"policy + limits per decision, {d['robot']}",
+                  f"{d['mean_ms']:.2f} ms (max {d['max_pct_of_step']:.1f} % of 0.1 s)")
     Console().print(t)
 
 

@@ -1,163 +1,263 @@
-"""`make reproduce-tables`: the paper's tables from shipped policies and TOPP-RA, next to the published values.
+"""`make reproduce-tables`: the paper's Tables I-VI from shipped policies and TOPP-RA, next to the published values.
 
-For every table row whose model directory exists under models/, the policy is evaluated on the row's
-test split with the paper's episode protocol (random segments, fixed seed) and TOPP-RA solves exactly the
-same segments. Missing test datasets are generated first (seeded, so the same paths every time).
-Outputs: results/tables.md, results/tables.csv, results/raw/<row>/{metrics.json, toppra.json}.
+Every evaluation (a shipped policy on a test split) and every TOPP-RA baseline (the same split, knots and
+episode plan) runs once, even when several table rows use it. Outputs (written atomically):
+results/tables.md, tables.csv, tables.tex, figures/*.png, raw/<evaluation>/metrics.json, raw/<toppra>.json;
+each step's console output goes to results/logs/<step>.log.
 
-    tools/reproduce_tables.py [--profile full|quick] [--train]
+Profiles:
+  full   1200 paper segments per evaluation on the committed test splits (datasets/), policies from models/.
+  quick  12 episodes; with --train: tiny generated datasets and tiny trainings under results/quick/ (tests the
+         whole pipeline in a few minutes; the numbers mean nothing).
+--train (TRAIN=1) trains every policy first (`pathrl-train +experiment=<model> resume=true`, budgets in
+conf/experiment/*.yaml; rerun to resume after an interruption) and ships it to models/<model>.
+
+    tools/reproduce_tables.py [--profile full|quick] [--train] [--only MODEL,...] [--reuse] [--out DIR]
 """
 
 from __future__ import annotations
 
 import argparse
 import csv
+import io
 import json
 import os
 import subprocess
 import sys
 import time
-from dataclasses import dataclass
+from collections.abc import Callable
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+from pathrl.repro.figures import pareto_table_ii, path_overlay  # noqa: E402
+from pathrl.repro.render import render_latex, render_markdown  # noqa: E402
+from pathrl.repro.tables import ROWS, Baseline, Evaluation, baselines, evaluations  # noqa: E402
+
 BIN = Path(sys.executable).parent
 PAPER = yaml.safe_load((ROOT / "tools" / "paper_tables.yaml").read_text())
+#: Evaluations whose episodes are drawn as example path overlays (one per robot).
+OVERLAYS = {"iiwa7_random": "KUKA iiwa 7, random path", "armar6_random": "ARMAR-6, random path",
+            "armar4_random": "ARMAR-4 (fixed base), random path"}
 
 
 @dataclass(frozen=True)
-class Row:
-    key: str  # row name in paper_tables.yaml
-    robot: str
-    dataset: str
-    model: str  # models/<dir>
-    knots: str = "curvature_9"
+class Profile:
+    name: str
+    episodes: int | None  # paper segments per evaluation (None: the CLIs' default, 1200)
+    num_train: int  # paths of generated datasets (--train)
+    num_test: int
+    train_overrides: tuple[str, ...] = ()
 
 
-TABLE_I = [
-    Row("iiwa7/random", "iiwa7", "random", "iiwa7_random"),
-    Row("iiwa7/target_point", "iiwa7", "target_point", "iiwa7_target_point"),
-    Row("iiwa7/ball_balancing", "iiwa7", "ball_balancing", "iiwa7_ball_balancing", "distance_5"),
-    Row("armar6/random", "armar6", "random", "armar6_random"),
-    Row("armar4_fixed/random", "armar4", "random", "armar4_random"),
-    Row("armar4_fixed/target_point", "armar4", "target_point", "armar4_target_point"),
-]
-PROFILES = {"full": {"episodes": 1200, "num_test": 200}, "quick": {"episodes": 12, "num_test": 200}}
+PROFILES = {
+    "full": Profile("full", None, 1000, 200),
+    "quick": Profile("quick", 12, 12, 4, ("iterations=2", "env.num_envs=64", "agent.num_steps_per_env=8",
+                                          "agent.save_interval=1", "threads=1")),
+}
 
 
-def sh(cmd: list[str]) -> None:
-    print("$", " ".join(cmd), flush=True)
-    subprocess.run(cmd, check=True, cwd=ROOT, env=dict(os.environ, OMP_NUM_THREADS="1"))
+@dataclass
+class Layout:
+    """Where a profile reads and writes."""
+
+    out: Path
+    models: Path
+    runs: Path
+    test_data: Path  # <robot>/<dataset> test splits
+    train_data: Path  # <robot>/<dataset> datasets with a train split (--train)
+
+    @classmethod
+    def of(cls, profile: Profile, out: Path, train: bool) -> Layout:
+        if profile.name == "quick" and train:  # self-contained: tiny datasets, runs and models under out/
+            return cls(out, out / "models", out / "runs", out / "data", out / "data")
+        return cls(out, ROOT / "models", ROOT / "runs", ROOT / "datasets", ROOT / "data")
 
 
-def ensure_dataset(row: Row, num_test: int) -> Path:
-    path = ROOT / "data" / row.robot / row.dataset
-    if not (path / "dataset.json").is_file():
-        sh([str(BIN / "pathrl-dataset"), "generate", f"robot={row.robot}", f"dataset={row.dataset}",
-            f"dataset.num_test={num_test}", "dataset.num_train=0"])
-    return path
+@dataclass
+class Step:
+    label: str
+    run: Callable[[], None]
+    failed: str | None = None
+    seconds: float = 0.0
 
 
-def run_row(row: Row, profile: dict, out: Path) -> dict | None:
-    model = ROOT / "models" / row.model
-    if not (model / "config.yaml").is_file():
-        print(f"-- {row.key}: no shipped policy at {model.relative_to(ROOT)}; skipped")
-        return None
-    data = ensure_dataset(row, profile["num_test"])
-    raw = out / "raw" / row.model
-    raw.mkdir(parents=True, exist_ok=True)
-    eps = profile["episodes"]
-    sh([str(BIN / "pathrl-eval"), f"run_dir={model}", f"dataset.path={data}", f"episodes={eps}",
-        "segments=paper", "seed=0", f"out={raw}"])
-    sh([str(BIN / "pathrl-toppra"), f"robot={row.robot}", f"dataset.path={data}", f"knots={row.knots}",
-        "segments=paper", f"episodes={eps}", "seed=0", "workers=2", f"out={raw / 'toppra.json'}"])
-    return {"metrics": json.loads((raw / "metrics.json").read_text()),
-            "toppra": json.loads((raw / "toppra.json").read_text())}
+@dataclass
+class Plan:
+    steps: list[Step] = field(default_factory=list)
+
+    def add(self, label: str, fn: Callable[[], None]) -> None:
+        self.steps.append(Step(label, fn))
 
 
-def fmt(x: float | None, nd: int = 2) -> str:
-    return "–" if x is None else f"{x:.{nd}f}"
+class StepFailed(RuntimeError):
+    pass
 
 
-def render(results: dict[str, dict], profile_name: str) -> tuple[str, list[list[str]]]:
-    t1 = PAPER["table_I_tracking_no_feedback"]
-    cols = t1["columns"]
-    lines = [f"# pathrl: the paper's tables reproduced (profile `{profile_name}`)", "",
-             "Each cell: **ours** / paper (ratio ours/paper). Episodes: random path segments of the test split "
-             "(start U(0,0.8), end U(start+0.2,1) snapped to a knot), fixed seed; TOPP-RA solves the same "
-             "segments under the same velocity/acceleration limits.", ""]
-    csv_rows = [["table", "row", "metric", "ours", "paper"]]
-    lines += ["## Table I: tracking without sensory feedback", "",
-              "| row | " + " | ".join(cols) + " | episodes | limit violations |",
-              "|---|" + "---|" * (len(cols) + 2)]
-    for key, paper in t1["rows"].items():
-        if key not in results:
-            lines.append(f"| {key} | " + " | ".join(f"– / {p}" for p in paper) + " | – | – |")
-            continue
-        m = results[key]["metrics"]
-        cells = []
-        for c, p in zip(cols, paper, strict=True):
-            cells.append(f"**{fmt(m[c])}** / {p} ({m[c] / p:.2f})")
-            csv_rows.append(["I", key, c, fmt(m[c], 4), str(p)])
-        lines.append(f"| {key} | " + " | ".join(cells) + f" | {m['episodes']} | {m['limit_violations']} |")
-    t6 = PAPER["table_VI_toppra_timing"]
-    lines += ["", "## Table VI: TOPP-RA on the same segments", "",
-              "Relative duration = TOPP-RA duration / learned duration (%). Our TOPP-RA honours the limits "
-              "exactly (checked at 240 Hz).", "",
-              "| row | TOPP-RA duration (s) | relative duration (%) | TOPP-RA max joint dev (rad) | learned / TOPP-RA |",
-              "|---|---|---|---|---|"]
-    for key, paper in t6["rows"].items():
-        if key not in results:
-            lines.append(f"| {key} | – / {paper[0]} | – / {paper[1]} | – / {paper[2]} | – |")
-            continue
-        m, tp = results[key]["metrics"], results[key]["toppra"]
-        td = tp["toppra_duration_s"]
-        rel = 100.0 * td / m["duration_s"]
-        lines.append(f"| {key} | **{fmt(td)}** / {paper[0]} | **{fmt(rel, 1)}** / {paper[1]} | "
-                     f"**{fmt(tp['toppra_max_joint_dev_rad'], 4)}** / {paper[2]} | **{fmt(m['duration_s'] / td)}** / "
-                     f"{100.0 / paper[1]:.2f} |")
-        csv_rows += [["VI", key, "toppra_duration_s", fmt(td, 4), str(paper[0])],
-                     ["VI", key, "toppra_relative_duration_pct", fmt(rel, 2), str(paper[1])],
-                     ["VI", key, "toppra_max_joint_dev_rad", fmt(tp["toppra_max_joint_dev_rad"], 5), str(paper[2])]]
-    t5 = PAPER["table_V_features_vs_toppra"]
-    lines += ["", "## Table V: features (TOPP-RA vs learned)", "", "| feature | TOPP-RA | ours |", "|---|---|---|"]
-    for k, (a, b) in t5["rows"].items():
-        lines.append(f"| {k.replace('_', ' ')} | {'yes' if a else 'no'} | {'yes' if b else 'no'} |")
-    missing = [r.key for r in TABLE_I if r.key not in results]
-    if missing:
-        lines += ["", "Rows without a shipped policy yet: " + ", ".join(missing) + "."]
-    return "\n".join(lines) + "\n", csv_rows
+def sh(cmd: list[str], log: Path) -> None:
+    """Run a command with its output in `log`; raise StepFailed with the log's last line on failure."""
+    log.parent.mkdir(parents=True, exist_ok=True)
+    with open(log, "w") as f:
+        f.write("$ " + " ".join(cmd) + "\n")
+        f.flush()
+        rc = subprocess.run(cmd, cwd=ROOT, stdout=f, stderr=subprocess.STDOUT,
+                            env=dict(os.environ, OMP_NUM_THREADS="1")).returncode
+    if rc != 0:
+        lines = [ln for ln in log.read_text().splitlines() if ln.strip()]
+        raise StepFailed(f"exit {rc}: {lines[-1] if lines else ''} (log: {log})")
+
+
+def build_plan(args: argparse.Namespace, profile: Profile, lay: Layout) -> Plan:
+    only = set(args.only.split(",")) if args.only else None
+    rows = tuple(r for r in ROWS if only is None or r.evaluation.model in only)
+    evals, bases = evaluations(rows), baselines(rows)
+    logs = lay.out / "logs"
+    plan = Plan()
+    if args.train:
+        needed = {(e.robot, e.dataset) for e in evals}
+        if profile.name == "quick":
+            for robot, name in sorted(needed):
+                dest = lay.train_data / robot / name
+                plan.add(f"dataset {robot}/{name}", lambda robot=robot, name=name, dest=dest: None if (
+                    dest / "dataset.json").is_file() and args.reuse else sh(
+                    [str(BIN / "pathrl-dataset"), "generate", f"robot={robot}", f"dataset={name}",
+                     f"dataset.num_train={profile.num_train}", f"dataset.num_test={profile.num_test}",
+                     f"dataset.path={dest}", "overwrite=true"], logs / f"dataset_{robot}_{name}.log"))
+        trained = {}
+        for e in evals:
+            if e.generalization:
+                continue
+            trained.setdefault(e.model, e)
+        for model, e in trained.items():
+            plan.add(f"train {model}", lambda model=model, e=e: train_and_ship(model, e, profile, lay, logs))
+    for e in evals:
+        plan.add(f"evaluate {e.id}", lambda e=e: evaluate(e, profile, lay, args.reuse, logs))
+    for b in bases:
+        plan.add(f"TOPP-RA {b.robot}/{b.dataset} ({b.segments})", lambda b=b: toppra(b, profile, lay, args.reuse, logs))
+    return plan
+
+
+def train_and_ship(model: str, e: Evaluation, profile: Profile, lay: Layout, logs: Path) -> None:
+    from pathrl.train.ship import ship
+
+    data = lay.train_data / e.robot / e.dataset
+    if not (data / "train.npz").is_file():
+        sh([str(BIN / "pathrl-dataset"), "generate", f"robot={e.robot}", f"dataset={e.dataset}",
+            f"dataset.num_train={profile.num_train}", f"dataset.num_test={profile.num_test}",
+            f"dataset.path={data}"], logs / f"dataset_{e.robot}_{e.dataset}.log")
+    run_dir = lay.runs / model / "seed0"
+    sh([str(BIN / "pathrl-train"), f"+experiment={model}", "resume=true", f"run_dir={run_dir}",
+        f"dataset.path={data}", *profile.train_overrides], logs / f"train_{model}.log")
+    ship(run_dir, lay.models / model)
+
+
+def evaluate(e: Evaluation, profile: Profile, lay: Layout, reuse: bool, logs: Path) -> None:
+    model = lay.models / e.model
+    raw = lay.out / "raw" / e.id
+    if not (model / "model.pt").is_file() and not any(model.glob("model_*.pt")):
+        return  # not shipped: the row shows a dash
+    if reuse and (raw / "metrics.json").is_file():
+        return
+    cmd = [str(BIN / "pathrl-eval"), f"run_dir={model}", f"dataset.path={lay.test_data / e.robot / e.dataset}",
+           f"segments={e.segments}", "seed=0", f"out={raw}"]
+    if profile.episodes is not None:
+        cmd.append(f"episodes={profile.episodes}")
+    sh(cmd, logs / f"eval_{e.id}.log")
+
+
+def toppra(b: Baseline, profile: Profile, lay: Layout, reuse: bool, logs: Path) -> None:
+    out = lay.out / "raw" / f"{b.id}.json"
+    if reuse and out.is_file():
+        return
+    cmd = [str(BIN / "pathrl-toppra"), f"robot={b.robot}", f"dataset.path={lay.test_data / b.robot / b.dataset}",
+           f"knots={b.knots}", f"segments={b.segments}", "seed=0", "workers=2", f"out={out}"]
+    if profile.episodes is not None:
+        cmd.append(f"episodes={profile.episodes}")
+    sh(cmd, logs / f"{b.id}.log")
+
+
+def collect(lay: Layout) -> dict:
+    """Load every metrics.json / TOPP-RA report of this output directory."""
+    res: dict = {"evaluations": {}, "baselines": {}}
+    for e in evaluations():
+        p = lay.out / "raw" / e.id / "metrics.json"
+        if p.is_file():
+            res["evaluations"][e.id] = json.loads(p.read_text())
+    for b in baselines():
+        p = lay.out / "raw" / f"{b.id}.json"
+        if p.is_file():
+            res["baselines"][b.id] = json.loads(p.read_text())
+    return res
+
+
+def write_atomic(path: Path, text: str) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.tmp")
+    tmp.write_text(text)
+    os.replace(tmp, path)
+
+
+def write_outputs(lay: Layout, profile: Profile) -> str:
+    res = collect(lay)
+    md, rows = render_markdown(res, PAPER, profile.name)
+    buf = io.StringIO()
+    csv.writer(buf, lineterminator="\n").writerows(rows)
+    write_atomic(lay.out / "tables.md", md)
+    write_atomic(lay.out / "tables.csv", buf.getvalue())
+    write_atomic(lay.out / "tables.tex", render_latex(res, PAPER))
+    figs = lay.out / "figures"
+    pareto_table_ii(res, PAPER, figs / "pareto_table_II.png")
+    for eid, title in OVERLAYS.items():
+        mcap = lay.out / "raw" / eid / "episodes.mcap"
+        if eid in res["evaluations"] and mcap.is_file():
+            path_overlay(mcap, res["evaluations"][eid], title, figs / f"paths_{eid}.png")
+    return md
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--profile", choices=sorted(PROFILES), default="full")
-    ap.add_argument("--train", action="store_true", help="retrain every policy first (not available yet)")
-    ap.add_argument("--out", default=str(ROOT / "results"))
+    ap.add_argument("--train", action="store_true", help="train (resume) every policy first, then ship it")
+    ap.add_argument("--only", default="", help="comma-separated model names: only their rows")
+    ap.add_argument("--reuse", action="store_true", help="keep evaluation / TOPP-RA results already in --out")
+    ap.add_argument("--out", default=None, help="output dir (default results/, quick: results/quick/)")
     args = ap.parse_args()
-    if args.train:
-        sys.exit("error: --train (TRAIN=1) is not implemented yet; train with pathrl-train and copy the run to models/")
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    profile = PROFILES[args.profile]
+    out = Path(args.out) if args.out else ROOT / ("results" if profile.name == "full" else "results/quick")
+    known = {r.evaluation.model for r in ROWS}
+    unknown = set(filter(None, args.only.split(","))) - known
+    if unknown:
+        sys.exit(f"error: --only: unknown model(s) {sorted(unknown)}; known: {sorted(known)}")
+    lay = Layout.of(profile, out.resolve(), args.train)
+    plan = build_plan(args, profile, lay)
+
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
     t0 = time.perf_counter()
-    results = {}
-    for row in TABLE_I:
-        r = run_row(row, PROFILES[args.profile], out)
-        if r is not None:
-            results[row.key] = r
-    md, rows = render(results, args.profile)
-    for name, text in (("tables.md", md),):
-        tmp = out / f".{name}.tmp"
-        tmp.write_text(text)
-        os.replace(tmp, out / name)
-    tmp = out / ".tables.csv.tmp"
-    with open(tmp, "w", newline="") as f:
-        csv.writer(f).writerows(rows)
-    os.replace(tmp, out / "tables.csv")
+    with Progress(TextColumn("[bold]reproduce-tables"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                  TextColumn("{task.description}")) as bar:
+        task = bar.add_task("", total=len(plan.steps))
+        for step in plan.steps:
+            bar.update(task, description=step.label)
+            ts = time.perf_counter()
+            try:
+                step.run()
+            except (StepFailed, FileNotFoundError) as exc:
+                step.failed = str(exc)
+                bar.console.print(f"[red]FAILED[/red] {step.label}: {exc}")
+            step.seconds = time.perf_counter() - ts
+            bar.console.print(f"{'failed' if step.failed else 'done':>6}  {step.label}  ({step.seconds:.0f} s)")
+            bar.advance(task)
+    md = write_outputs(lay, profile)
     print(md)
-    print(f"wrote {out / 'tables.md'} and {out / 'tables.csv'} in {time.perf_counter() - t0:.0f} s")
+    failed = [s for s in plan.steps if s.failed]
+    print(f"wrote {lay.out / 'tables.md'} (.csv, .tex, figures/) in {time.perf_counter() - t0:.0f} s; "
+          f"{len(plan.steps) - len(failed)}/{len(plan.steps)} steps ok")
+    if failed:
+        sys.exit(1)
 
 
 if __name__ == "__main__":

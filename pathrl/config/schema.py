@@ -109,6 +109,16 @@ class EnvCfg:
     stop_tolerance: float = 0.01
     stop_bonus: bool = True
     knot_obs: str = "relative"  # relative | absolute (paper)
+    end_obs: bool = True  # vector to the end knot + arc length left, at knot-gap scale
+
+
+@dataclass
+class StdAnnealCfg:
+    """Cap on the policy's action noise: from ``start`` (fraction of the iterations) it falls log-linearly from the
+    initial std to ``final`` at the last iteration."""
+
+    final: float = 0.03  # std cap at the last iteration (action units)
+    start: float = 0.5  # fraction of ``iterations`` after which the cap starts to fall
 
 
 @dataclass
@@ -124,7 +134,8 @@ class TrainAppCfg:
     experiment: str = MISSING
     seed: int = 0
     device: str = "cpu"
-    threads: int = 1
+    threads: int = 2
     iterations: int = 400
     resume: bool = False
     run_dir: str = MISSING
+    std_anneal: StdAnnealCfg | None = field(default_factory=lambda: StdAnnealCfg())

@@ -54,13 +54,15 @@ class ReferenceTrackingEnv:
                  reward_terms: list[RewardTerm], knot_gap: float, n_state: int = 9, dt: float = 0.1,
                  substeps: int = 8, budget_steps: int = 160, stop_tolerance: float = 0.01,
                  stop_bonus: bool = True, max_deviation: float | None = None, braking=None,
-                 knot_obs: str = "relative") -> None:
+                 knot_obs: str = "relative", end_obs: bool = False) -> None:
         self.robot, self.path, self.terms = robot, path, reward_terms
         self.dt, self.substeps, self.n_state = dt, substeps, n_state
         self.knot_gap, self.horizon = knot_gap, (n_state - 1) * knot_gap
-        self.budget, self.stop_tol, self.stop_bonus, self.max_dev = budget_steps, stop_tolerance, stop_bonus, max_deviation
+        self.budget, self.stop_tol = budget_steps, stop_tolerance
+        self.stop_bonus, self.max_dev = stop_bonus, max_deviation
         self.braking_law = braking
         self.knot_obs = knot_obs
+        self.end_obs = end_obs
         self.limiter = PosVelJerkLimitation(
             time_step=dt, pos_limits=robot.pos_limits.copy(),
             vel_limits=np.stack([-robot.vel_limits, robot.vel_limits], 1),
@@ -95,7 +97,8 @@ class ReferenceTrackingEnv:
 
     def observation(self) -> np.ndarray:
         lo, hi = self.robot.pos_limits[:, 0], self.robot.pos_limits[:, 1]
-        parts = [2 * (self.pos - lo) / (hi - lo) - 1, self.vel / self.robot.vel_limits, self.acc / self.robot.acc_limits]
+        parts = [2 * (self.pos - lo) / (hi - lo) - 1, self.vel / self.robot.vel_limits,
+                 self.acc / self.robot.acc_limits]
         plo, phi = lo[self.pi], hi[self.pi]
         if self.knot_obs == "relative":
             parts.append(((self.window_knots - self.pos[self.pi]) / self.horizon).ravel())
@@ -106,6 +109,9 @@ class ReferenceTrackingEnv:
         ahead = 2 * (self.window_s - d0) / self.horizon - 1
         parts.append(ahead[-1:])
         parts.append(ahead[1:])
+        if self.end_obs:
+            parts.append((self.path.at(self.end_s) - self.pos[self.pi]) / self.knot_gap)
+            parts.append([2 * min(max((self.end_s - self.s) / self.knot_gap, 0.0), 1.0) - 1])
         return np.clip(np.concatenate([np.ravel(p) for p in parts]), -1, 1)
 
     def step(self, action: np.ndarray) -> ReferenceStep:
@@ -139,7 +145,8 @@ class ReferenceTrackingEnv:
         self.s = min(self.s + moved, self.end_s)
         self.steps += 1
         reached = self.s >= self.end_s - 1e-9
-        stopped = self.braking and bool(np.all(np.abs(self.vel) < self.stop_tol) and np.all(np.abs(self.acc) < self.stop_tol))
+        at_rest = np.all(np.abs(self.vel) < self.stop_tol) and np.all(np.abs(self.acc) < self.stop_tol)
+        stopped = self.braking and bool(at_rest)
         self.braking = self.braking or reached
         terminated = stopped or (self.max_dev is not None and dev_max > self.max_dev)
         time_out = self.steps >= self.budget and not terminated

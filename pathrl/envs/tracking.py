@@ -6,7 +6,10 @@ MDP (paper, Sec. III; original_pathtracking.md 3-7):
           interval, the path length covered by the window, the distance of each window knot.
           Knots are given relative to the robot's position by default (``knot_obs=relative``: the
           policy sees the direction to each knot directly, which trains much faster); the paper's
-          absolute knot positions are ``knot_obs=absolute``.
+          absolute knot positions are ``knot_obs=absolute``. With ``end_obs`` the state also holds the
+          vector from the robot to the segment's end knot and the arc length left, both scaled by the knot
+          gap D (clipped to [-1, 1]): seen at the window's scale (K D) the last centimetres vanish, and a
+          deterministic policy could come to rest just short of the end.
   action  one value in [-1, 1] per joint, mapped into the valid acceleration range for the end of the
           next 0.1 s step (jerk/acceleration/velocity/position limits, braking stays possible).
   reward  sum of weighted terms (pathrl.envs.rewards): path length R_l and deviation R_d (+ task terms).
@@ -68,6 +71,7 @@ class TrackingEnvCfg:
     knot_gap_norm: float | None = None  # D (rad); default: the path set's largest knot gap
     n_state: int = 9  # knots in the observation
     knot_obs: str = "relative"  # knots as seen from the robot (relative) or in joint space (absolute, paper)
+    end_obs: bool = False  # add the vector to the end knot and the arc length left, both at knot-gap scale
     autoreset: bool = True
 
 
@@ -117,6 +121,7 @@ class PathTrackingEnv(_VecEnvBase):
         self.start_s = torch.zeros(n, **f64)
         self.end_s = torch.zeros(n, **f64)
         self.end_knot = torch.zeros(n, dtype=torch.long, device=self.device)
+        self.end_q = torch.zeros(n, self.paths.dof, **f64)  # end knot (path joints)
         self.l_obs = torch.zeros(n, **f64)  # arc length of the last knot in the current window
         self.close_to_end = torch.zeros(n, dtype=torch.bool, device=self.device)
         self.braking = torch.zeros(n, dtype=torch.bool, device=self.device)
@@ -146,6 +151,7 @@ class PathTrackingEnv(_VecEnvBase):
         self.s[env_ids] = seg.start_s
         self.end_s[env_ids] = seg.end_s
         self.end_knot[env_ids] = seg.end_knot
+        self.end_q[env_ids] = self.paths.position_at(seg.path, seg.end_s)
         q0 = self.paths.position_at(seg.path, seg.start_s)
         pos = torch.zeros(len(env_ids), self.robot.dof, dtype=torch.float64, device=self.device)
         pos[:, self.path_index] = q0
@@ -187,6 +193,7 @@ class PathTrackingEnv(_VecEnvBase):
         ek = self.paths.num_knots[path] - 1 if end_knot is None else end_knot
         self.end_knot[env_ids] = ek
         self.end_s[env_ids] = self.paths.knot_s[path, ek]
+        self.end_q[env_ids] = self.paths.position_at(path, self.end_s[env_ids])
         self.braking[env_ids] = False
         self._update_window()
 
@@ -220,7 +227,12 @@ class PathTrackingEnv(_VecEnvBase):
         self.close_to_end = ks[:, -1] >= self.end_s
         inside = 2.0 * (self.s.unsqueeze(1) - d0) / self.knot_gap - 1.0
         ahead = 2.0 * (ks - d0) / self.horizon - 1.0  # [:, -1] is the window length
-        obs = torch.cat([pos_n, vel_n, acc_n, knots_n, inside, ahead[:, -1:], ahead[:, 1:]], dim=1)
+        parts = [pos_n, vel_n, acc_n, knots_n, inside, ahead[:, -1:], ahead[:, 1:]]
+        if self.cfg.end_obs:
+            to_end = (self.end_q - self.pos[:, self.path_index]) / self.knot_gap
+            left = 2.0 * ((self.end_s - self.s) / self.knot_gap).clamp(0.0, 1.0) - 1.0
+            parts += [to_end, left.unsqueeze(1)]
+        obs = torch.cat(parts, dim=1)
         return obs.clamp(-1.0, 1.0).to(torch.float32)
 
     @property

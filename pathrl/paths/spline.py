@@ -48,7 +48,9 @@ def fit_spline(knots: np.ndarray) -> BSpline:
     return make_interp_spline(u, knots, k=3, bc_type="natural")
 
 
-def arc_length_table(spline: BSpline, knots: np.ndarray, step: float = ARC_LENGTH_STEP) -> tuple[np.ndarray, np.ndarray]:
+def arc_length_table(
+    spline: BSpline, knots: np.ndarray, step: float = ARC_LENGTH_STEP
+) -> tuple[np.ndarray, np.ndarray]:
     """Dense table (u, s) with s the arc length at parameter u. Polyline through ~1 sample per `step` rad."""
     chord = float(np.sum(np.linalg.norm(np.diff(knots, axis=0), axis=1)))
     n = max(int(np.ceil(chord / step)) + 1, 2)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import copy
 import json
+import math
 import os
 import re
 import time
@@ -44,6 +45,7 @@ def env_cfg_from(cfg: dict[str, Any], num_envs: int | None = None, seed: int | N
         knot_gap_norm=knot_gap_norm,
         n_state=int(cfg["knots"]["n_state"]),
         knot_obs=str(e.get("knot_obs", "relative")),
+        end_obs=bool(e.get("end_obs", False)),  # runs saved before this option existed did not have it
     )
 
 
@@ -70,8 +72,41 @@ def rsl_train_cfg(cfg: dict[str, Any], run_dir: Path) -> dict[str, Any]:
     return agent
 
 
+def std_cap(it: int, total: int, init_std: float, final: float, start: float) -> float:
+    """Upper bound on the action std at iteration `it` of `total`: `init_std` until `start * total`, then
+    log-linear down to `final` at the last iteration."""
+    t0 = start * total
+    frac = min(max((it - t0) / max(total - 1 - t0, 1.0), 0.0), 1.0)
+    return float(init_std * (final / init_std) ** frac)
+
+
 class PathRLRunner(OnPolicyRunner):
-    """OnPolicyRunner with atomic checkpoints and safe (weights-only) loading."""
+    """OnPolicyRunner with atomic checkpoints, safe (weights-only) loading and an optional action-noise cap.
+
+    PPO evaluates the policy's mean action, but trains it under noise; near the path end a noisy policy
+    can let the noise do the last centimetres. Capping the std late in training (``std_anneal``) makes
+    the mean action itself finish the path.
+    """
+
+    def set_std_schedule(self, total: int, init_std: float, final: float, start: float) -> None:
+        """Cap the std before every rollout (the cap depends only on the iteration, so resume reproduces it)."""
+        dist = self.alg.get_policy().distribution
+        update = self.alg.update
+
+        def apply(it: int) -> None:
+            dist.std_range[1] = max(std_cap(it, total, init_std, final, start), dist.std_range[0])
+            dist.log_std_range[1] = math.log(dist.std_range[1])
+
+        next_it = [self.current_learning_iteration]
+
+        def update_then_cap() -> dict[str, float]:
+            out = update()
+            next_it[0] += 1
+            apply(next_it[0])
+            return out
+
+        apply(next_it[0])
+        self.alg.update = update_then_cap
 
     def save(self, path: str, infos: dict | None = None) -> None:
         saved = self.alg.save()
@@ -82,7 +117,8 @@ class PathRLRunner(OnPolicyRunner):
         os.replace(tmp, path)
         self.logger.save_model(path, self.current_learning_iteration)
 
-    def load(self, path: str, load_cfg: dict | None = None, strict: bool = True, map_location: str | None = None) -> dict:
+    def load(self, path: str, load_cfg: dict | None = None, strict: bool = True,
+             map_location: str | None = None) -> dict:
         loaded = torch.load(path, weights_only=True, map_location=map_location)
         if self.alg.load(loaded, load_cfg, strict):
             self.current_learning_iteration = int(loaded["iter"])
@@ -125,7 +161,8 @@ def train(cfg: dict[str, Any], run_dir: Path, resume: bool = False) -> dict[str,
     env = build_env(cfg, "train")
     prev = json.loads((run_dir / "summary.json").read_text()) if (run_dir / "summary.json").exists() else {}
     # The observation normalizer D must be known to evaluate the policy on any other path set.
-    write_json_atomic(run_dir / "summary.json", {**prev, "experiment": cfg["experiment"], "knot_gap_norm": env.knot_gap})
+    write_json_atomic(run_dir / "summary.json",
+                      {**prev, "experiment": cfg["experiment"], "knot_gap_norm": env.knot_gap})
     train_cfg = rsl_train_cfg(cfg, run_dir)
     runner = PathRLRunner(env, train_cfg, log_dir=str(run_dir), device=cfg.get("device", "cpu"))
     done_before = 0
@@ -134,6 +171,10 @@ def train(cfg: dict[str, Any], run_dir: Path, resume: bool = False) -> dict[str,
         runner.current_learning_iteration += 1  # the checkpoint's iteration is finished
         done_before = runner.current_learning_iteration
     total = int(cfg["iterations"])
+    anneal = cfg.get("std_anneal")
+    if anneal:
+        init_std = float(cfg["agent"]["actor"]["distribution_cfg"].get("init_std", 1.0))
+        runner.set_std_schedule(total, init_std, float(anneal["final"]), float(anneal["start"]))
     remaining = max(total - done_before, 0)
     t0 = time.perf_counter()
     if remaining:

@@ -1,0 +1,163 @@
+"""Render reproduced tables next to the paper's values: Markdown, CSV rows and LaTeX.
+
+Pure functions of ``results`` = ``{"evaluations": {evaluation_id: metrics.json}, "baselines":
+{baseline_id: toppra.json}}`` and the paper's tables (``paper_tables.yaml``), so the output is fixed by
+its inputs (tests/golden/tables.md).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from pathrl.repro.tables import (
+    ROWS,
+    SHORT_COLUMNS,
+    TABLE_I,
+    TABLE_II,
+    TABLE_III,
+    TABLE_IV,
+    TABLE_V,
+    TABLE_VI,
+    Row,
+)
+
+TITLES = {
+    TABLE_I: "Table I: tracking without sensory feedback",
+    TABLE_II: "Table II: reward trade-off, path length vs deviation (iiwa7, random)",
+    TABLE_III: "Table III: knots in the state (iiwa7, random)",
+    TABLE_IV: "Table IV: generalization, trained on random, evaluated on target point paths",
+}
+UNITS = {"duration_s": "s", "rad": "rad", "cm": "cm", "deg": "deg"}
+
+
+def _fmt(x: float | None, nd: int = 2) -> str:
+    return "–" if x is None else f"{x:.{nd}f}"
+
+
+def _nd(column: str) -> int:
+    return 3 if column.endswith("_rad") else 2
+
+
+def _metrics(results: dict[str, Any], row: Row) -> dict[str, Any] | None:
+    return results.get("evaluations", {}).get(row.evaluation.id)
+
+
+def _toppra(results: dict[str, Any], row: Row) -> dict[str, Any] | None:
+    return results.get("baselines", {}).get(row.evaluation.baseline.id)
+
+
+def _cell(ours: float | None, paper: float | None, nd: int) -> str:
+    if ours is None:
+        return f"– / {_fmt(paper, nd)}" if paper is not None else "–"
+    if paper is None:
+        return f"**{_fmt(ours, nd)}**"
+    ratio = f" ({ours / paper:.2f})" if paper else ""
+    return f"**{_fmt(ours, nd)}** / {_fmt(paper, nd)}{ratio}"
+
+
+def _learned_table(results: dict[str, Any], paper: dict[str, Any], table: str,
+                   columns: tuple[str, ...] | None = None) -> tuple[list[str], list[list[str]]]:
+    cols = list(columns or paper[table]["columns"])
+    pcols = paper[table]["columns"]
+    lines = [f"## {TITLES[table]}", "",
+             "| row | " + " | ".join(cols) + " | learned / TOPP-RA | episodes | limit violations |",
+             "|---|" + "---|" * (len(cols) + 3)]
+    csv_rows: list[list[str]] = []
+    for row in (r for r in ROWS if r.table == table):
+        p = dict(zip(pcols, paper[table]["rows"].get(row.key, []), strict=False))
+        m, tp = _metrics(results, row), _toppra(results, row)
+        cells = [_cell(None if m is None else m[c], p.get(c), _nd(c)) for c in cols]
+        rel = "–"
+        if m is not None and tp is not None and tp.get("toppra_duration_s"):
+            rel = f"{m['duration_s'] / tp['toppra_duration_s']:.2f}"
+        eps = "–" if m is None else str(m["episodes"])
+        viol = "–" if m is None else str(m["limit_violations"])
+        lines.append(f"| {row.key} | " + " | ".join(cells) + f" | {rel} | {eps} | {viol} |")
+        for c in cols:
+            csv_rows.append([table, row.key, c, "" if m is None else f"{m[c]:.6g}",
+                             "" if p.get(c) is None else f"{p[c]:g}"])
+    return lines, csv_rows
+
+
+def _table_vi(results: dict[str, Any], paper: dict[str, Any]) -> tuple[list[str], list[list[str]]]:
+    p6 = paper[TABLE_VI]["rows"]
+    p1 = paper[TABLE_I]
+    lines = ["## Table VI: TOPP-RA on the same segments", "",
+             "Relative duration = TOPP-RA duration / learned duration (%). Our TOPP-RA honours the velocity and "
+             "acceleration limits exactly (checked at 240 Hz). *paper learned / our TOPP-RA* sets the paper's "
+             "learned duration (Table I) against our TOPP-RA on our test split, the bar a policy here has to meet.",
+             "",
+             "| row | TOPP-RA duration (s) | relative duration (%) | TOPP-RA max joint dev (rad) | "
+             "learned / TOPP-RA | paper learned / our TOPP-RA |",
+             "|---|---|---|---|---|---|"]
+    csv_rows: list[list[str]] = []
+    for row in (r for r in ROWS if r.table == TABLE_I):
+        pv = p6.get(row.key, [None, None, None])
+        m, tp = _metrics(results, row), _toppra(results, row)
+        td = None if tp is None else tp.get("toppra_duration_s")
+        rel = None if (m is None or td is None) else 100.0 * td / m["duration_s"]
+        dev = None if tp is None else tp.get("toppra_max_joint_dev_rad")
+        ratio = "–" if rel is None else f"**{100.0 / rel:.2f}** / {_fmt(None if pv[1] is None else 100.0 / pv[1])}"
+        paper_dur = dict(zip(p1["columns"], p1["rows"][row.key], strict=True))["duration_s"]
+        bar = "–" if td is None else f"{paper_dur / td:.2f}"
+        lines.append(f"| {row.key} | {_cell(td, pv[0], 2)} | {_cell(rel, pv[1], 1)} | {_cell(dev, pv[2], 4)} | "
+                     f"{ratio} | {bar} |")
+        for name, ours, pap in (("toppra_duration_s", td, pv[0]), ("toppra_relative_duration_pct", rel, pv[1]),
+                                ("toppra_max_joint_dev_rad", dev, pv[2])):
+            csv_rows.append([TABLE_VI, row.key, name, "" if ours is None else f"{ours:.6g}",
+                             "" if pap is None else f"{pap:g}"])
+    return lines, csv_rows
+
+
+def _table_v(paper: dict[str, Any]) -> list[str]:
+    lines = ["## Table V: features (TOPP-RA vs learned)", "", "| feature | TOPP-RA | ours |", "|---|---|---|"]
+    for k, (a, b) in paper[TABLE_V]["rows"].items():
+        lines.append(f"| {k.replace('_', ' ')} | {'yes' if a else 'no'} | {'yes' if b else 'no'} |")
+    return lines
+
+
+def render_markdown(results: dict[str, Any], paper: dict[str, Any], profile: str) -> tuple[str, list[list[str]]]:
+    """`results/tables.md` text and the CSV rows (table, row, metric, ours, paper)."""
+    lines = [f"# pathrl: the paper's tables reproduced (profile `{profile}`)", "",
+             "Each cell: **ours** / paper (ours / paper). Episodes: random segments of the project's test split "
+             "(start U(0, 0.8), end U(start + 0.2, 1) moved forward to a knot; whole paths for ball balancing), "
+             "fixed seed; the deterministic policy and TOPP-RA see the same segments. A dash: no shipped policy "
+             "for that row yet.", ""]
+    csv_rows = [["table", "row", "metric", "ours", "paper"]]
+    for table in (TABLE_I, TABLE_II, TABLE_III, TABLE_IV):
+        cols = None if table == TABLE_I else SHORT_COLUMNS
+        body, rows = _learned_table(results, paper, table, cols)
+        lines += body + [""]
+        csv_rows += rows
+    body, rows = _table_vi(results, paper)
+    lines += body + [""] + _table_v(paper)
+    csv_rows += rows
+    missing = sorted({r.evaluation.model for r in ROWS if _metrics(results, r) is None})
+    if missing:
+        lines += ["", "Policies not shipped yet (train with `make reproduce-tables TRAIN=1` or "
+                  "`pathrl-train +experiment=NAME`): " + ", ".join(missing) + "."]
+    return "\n".join(lines) + "\n", csv_rows
+
+
+def _tex_escape(s: str) -> str:
+    return s.replace("_", r"\_")
+
+
+def render_latex(results: dict[str, Any], paper: dict[str, Any]) -> str:
+    """Tables I-IV as booktabs tabulars, cells `ours (paper)`."""
+    out = ["% generated by tools/reproduce_tables.py; cells: ours (paper)"]
+    for table in (TABLE_I, TABLE_II, TABLE_III, TABLE_IV):
+        cols = list(paper[table]["columns"] if table == TABLE_I else SHORT_COLUMNS)
+        pcols = paper[table]["columns"]
+        out += [f"% {TITLES[table]}", r"\begin{tabular}{l" + "r" * len(cols) + "}", r"\toprule",
+                "row & " + " & ".join(_tex_escape(c) for c in cols) + r" \\", r"\midrule"]
+        for row in (r for r in ROWS if r.table == table):
+            p = dict(zip(pcols, paper[table]["rows"].get(row.key, []), strict=False))
+            m = _metrics(results, row)
+            cells = []
+            for c in cols:
+                ours = "--" if m is None else _fmt(m[c], _nd(c))
+                cells.append(f"{ours} ({_fmt(p.get(c), _nd(c))})" if c in p else ours)
+            out.append(_tex_escape(row.key) + " & " + " & ".join(cells) + r" \\")
+        out += [r"\bottomrule", r"\end{tabular}", ""]
+    return "\n".join(out)

@@ -1,0 +1,107 @@
+"""The paper's Tables I-VI as data: which shipped policy, test split and TOPP-RA run fill each row.
+
+An *evaluation* is one policy on one test split (``Evaluation``); a *baseline* is TOPP-RA on the same
+split, knots and episode plan (``Baseline``). Several rows share them (iiwa7 random fills a row of
+Tables I, II, III and VI), so each is computed once.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+#: Columns of Tables II-IV (and the deviation columns of the Pareto plot).
+SHORT_COLUMNS = ("duration_s", "cart_pos_dev_mean_cm", "cart_pos_dev_max_cm", "cart_pos_dev_final_cm")
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    """`models/<model>` evaluated on `data/<robot>/<dataset>` (test split)."""
+
+    model: str
+    robot: str
+    dataset: str
+    knots: str = "curvature_9"
+    segments: str = "paper"  # paper (random segments) | full (whole paths)
+    generalization: bool = False  # evaluated on another dataset than the one it was trained on
+
+    @property
+    def id(self) -> str:
+        return f"{self.model}_on_{self.dataset}" if self.generalization else self.model
+
+    @property
+    def baseline(self) -> Baseline:
+        return Baseline(self.robot, self.dataset, _knot_positions(self.knots), self.segments)
+
+
+@dataclass(frozen=True)
+class Baseline:
+    """TOPP-RA on `data/<robot>/<dataset>` (test split) with the evaluation's episode plan."""
+
+    robot: str
+    dataset: str
+    knots: str
+    segments: str
+
+    @property
+    def id(self) -> str:
+        return f"toppra_{self.robot}_{self.dataset}_{self.segments}"
+
+
+def _knot_positions(knots: str) -> str:
+    """Knot configs that differ only in how many knots the state shows share positions (and so the plan)."""
+    strategy, _ = knots.rsplit("_", 1)
+    return f"{strategy}_9"
+
+
+@dataclass(frozen=True)
+class Row:
+    table: str  # key in paper_tables.yaml
+    key: str  # row key in that table
+    evaluation: Evaluation
+
+
+def _e(model: str, robot: str, dataset: str, knots: str = "curvature_9", segments: str = "paper",
+       generalization: bool = False) -> Evaluation:
+    return Evaluation(model, robot, dataset, knots, segments, generalization)
+
+
+IIWA_RANDOM = _e("iiwa7_random", "iiwa7", "random")
+ARMAR4_RANDOM = _e("armar4_random", "armar4", "random")
+
+TABLE_I = "table_I_tracking_no_feedback"
+TABLE_II = "table_II_tradeoff_length_vs_deviation"
+TABLE_III = "table_III_knots_in_state"
+TABLE_IV = "table_IV_generalization_random_to_target_point"
+TABLE_V = "table_V_features_vs_toppra"
+TABLE_VI = "table_VI_toppra_timing"
+
+ROWS: tuple[Row, ...] = (
+    Row(TABLE_I, "iiwa7/random", IIWA_RANDOM),
+    Row(TABLE_I, "iiwa7/target_point", _e("iiwa7_target_point", "iiwa7", "target_point")),
+    Row(TABLE_I, "iiwa7/ball_balancing", _e("iiwa7_ball_balancing", "iiwa7", "ball_balancing", "distance_5", "full")),
+    Row(TABLE_I, "armar6/random", _e("armar6_random", "armar6", "random")),
+    Row(TABLE_I, "armar4_fixed/random", ARMAR4_RANDOM),
+    Row(TABLE_I, "armar4_fixed/target_point", _e("armar4_target_point", "armar4", "target_point")),
+    Row(TABLE_II, "length_lt_deviation", _e("iiwa7_random_length_lt_deviation", "iiwa7", "random")),
+    Row(TABLE_II, "length_eq_deviation", IIWA_RANDOM),
+    Row(TABLE_II, "length_gt_deviation", _e("iiwa7_random_length_gt_deviation", "iiwa7", "random")),
+    Row(TABLE_III, "knots_5", _e("iiwa7_random_knots5", "iiwa7", "random", "curvature_5")),
+    Row(TABLE_III, "knots_7", _e("iiwa7_random_knots7", "iiwa7", "random", "curvature_7")),
+    Row(TABLE_III, "knots_9", IIWA_RANDOM),
+    Row(TABLE_IV, "iiwa7", _e("iiwa7_random", "iiwa7", "target_point", generalization=True)),
+    Row(TABLE_IV, "armar4_fixed", _e("armar4_random", "armar4", "target_point", generalization=True)),
+)
+
+
+def evaluations(rows: tuple[Row, ...] = ROWS) -> list[Evaluation]:
+    """Distinct evaluations in table order."""
+    return list(dict.fromkeys(r.evaluation for r in rows))
+
+
+def baselines(rows: tuple[Row, ...] = ROWS) -> list[Baseline]:
+    """Distinct TOPP-RA runs in table order."""
+    return list(dict.fromkeys(r.evaluation.baseline for r in rows))
+
+
+def table_i_row(key: str) -> Row:
+    return next(r for r in ROWS if r.table == TABLE_I and r.key == key)

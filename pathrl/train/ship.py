@@ -1,0 +1,53 @@
+"""Turn a training run into a shipped model directory (config, slim weights, training summary)."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+from pathlib import Path
+from typing import Any
+
+import torch
+import yaml
+
+from pathrl.train.runner import latest_checkpoint, write_json_atomic
+
+
+def training_stats(run_dir: Path, last_iter: int) -> dict[str, Any]:
+    """Iterations, env steps and wall time up to checkpoint `last_iter`, from run.mcap and the config."""
+    from pathrl.logging.mcap_io import read_messages
+
+    cfg = yaml.safe_load((run_dir / "config.yaml").read_text())
+    per_iter = int(cfg["agent"]["num_steps_per_env"]) * int(cfg["env"]["num_envs"])
+    rows = [m for t, _, m in read_messages(run_dir / "run.mcap") if t == "/train/scalars"]
+    rows = [m for m in rows if m["iteration"] <= last_iter]
+    wall = sum(m["values"].get("Perf/collection_time", 0.0) + m["values"].get("Perf/learning_time", 0.0) for m in rows)
+    last = rows[-1]["values"] if rows else {}
+    return {"checkpoint_iteration": last_iter, "iterations": last_iter + 1, "env_steps": (last_iter + 1) * per_iter,
+            "steps_per_iteration": per_iter, "wall_time_s": round(wall, 1),
+            "final_train_metrics": {k: v for k, v in last.items()
+                                    if k.startswith(("Metrics/", "Episode_Termination/"))}}
+
+
+def ship(run_dir: Path, dest: Path) -> Path:
+    """Copy the run's config and last checkpoint (actor + critic weights, no optimizer) to `dest`."""
+    run_dir, dest = Path(run_dir), Path(dest)
+    ckpt = latest_checkpoint(run_dir)
+    if ckpt is None or not (run_dir / "config.yaml").is_file():
+        raise FileNotFoundError(f"{run_dir} has no config.yaml or checkpoint")
+    state = torch.load(ckpt, weights_only=True, map_location="cpu")
+    slim = {k: state[k] for k in ("actor_state_dict", "critic_state_dict", "iter")}
+    slim["infos"] = {"source_checkpoint": ckpt.name}
+    dest.mkdir(parents=True, exist_ok=True)
+    tmp = dest / "model.pt.tmp"
+    torch.save(slim, tmp)
+    os.replace(tmp, dest / "model.pt")
+    tmp_cfg = dest / "config.yaml.tmp"
+    shutil.copyfile(run_dir / "config.yaml", tmp_cfg)
+    os.replace(tmp_cfg, dest / "config.yaml")
+    summary = json.loads((run_dir / "summary.json").read_text()) if (run_dir / "summary.json").is_file() else {}
+    summary.update(training_stats(run_dir, int(state["iter"])))
+    summary["shipped_from"] = str(run_dir)
+    write_json_atomic(dest / "summary.json", summary)
+    return dest

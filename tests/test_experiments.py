@@ -1,0 +1,75 @@
+"""Every table row and sweep composes; the train CLI's multirun reports a failing job without stopping the others."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+from pathlib import Path
+
+import pytest
+from hydra import compose, initialize_config_dir
+
+from pathrl.cli.common import CONF_DIR
+from pathrl.config.store import register
+
+EXPERIMENTS = sorted(p.stem for p in (CONF_DIR / "experiment").glob("*.yaml"))
+SWEEPS = sorted(p.stem for p in (CONF_DIR / "sweep").glob("*.yaml"))
+ROOT = Path(__file__).resolve().parents[1]
+BIN = Path(__import__("sys").executable).parent
+
+
+def _compose(overrides, hydra_cfg=False):
+    register()
+    with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
+        return compose("train", overrides=overrides, return_hydra_config=hydra_cfg)
+
+
+@pytest.mark.parametrize("name", EXPERIMENTS)
+def test_experiment_composes(name):
+    cfg = _compose([f"+experiment={name}"])
+    assert cfg.experiment == name
+    assert cfg.run_dir == f"runs/{name}/seed0"
+    assert cfg.dataset.path == f"data/{cfg.robot.name}/{cfg.dataset.name}"
+    assert name.startswith(cfg.robot.name) and cfg.iterations > 0
+    assert cfg.reward.terms.path_length.weight > 0
+
+
+def test_experiment_values():
+    assert _compose(["+experiment=iiwa7_random_knots5"]).knots.n_state == 5
+    assert _compose(["+experiment=iiwa7_random_length_gt_deviation"]).reward.terms.path_length.weight == 4.0
+    ball = _compose(["+experiment=iiwa7_ball_balancing"])
+    assert (ball.env.segments, ball.knots.strategy, ball.knots.n_state) == ("full", "distance", 5)
+    assert _compose(["+experiment=armar4_random"]).robot.name == "armar4"
+
+
+@pytest.mark.parametrize("name", SWEEPS)
+def test_sweep_composes_with_existing_experiments(name):
+    cfg = _compose([f"+sweep={name}"], hydra_cfg=True)
+    exps = cfg.hydra.sweeper.params["+experiment"].split(",")
+    assert set(exps) <= set(EXPERIMENTS) and len(exps) >= 3
+    assert cfg.hydra.launcher._target_.endswith("JoblibLauncher")
+    assert cfg.hydra.launcher.n_jobs * cfg.threads <= 2  # respects the 2-core machine
+    for e in exps:  # each job composes
+        assert _compose([f"+sweep={name}", f"+experiment={e}"]).experiment == e
+
+
+def test_slurm_launcher_composes():
+    cfg = _compose(["+sweep=table_I", "hydra/launcher=slurm"], hydra_cfg=True)
+    assert "submitit" in cfg.hydra.launcher._target_.lower()
+    assert cfg.hydra.launcher.cpus_per_task >= 1
+
+
+@pytest.mark.slow
+def test_multirun_failing_job_does_not_stop_the_others(tmp_path, tiny_dataset):
+    """Two jobs, the first with a missing dataset: the second still trains; jobs.jsonl names the failure."""
+    sweep = tmp_path / "sweep"
+    r = subprocess.run(
+        [str(BIN / "pathrl-train"), "-m", f"dataset.path={tmp_path / 'missing'},{tiny_dataset}",
+         "iterations=1", "env.num_envs=16", "agent.num_steps_per_env=4", "threads=1",
+         f"run_dir={tmp_path}/run_${{hydra:job.num}}", f"hydra.sweep.dir={sweep}"],
+        cwd=tmp_path, capture_output=True, text=True, timeout=600)
+    recs = [json.loads(x) for x in (sweep / "jobs.jsonl").read_text().splitlines()]
+    assert [x["status"] for x in sorted(recs, key=lambda x: x["job"])] == ["failed", "ok"]
+    assert "dataset directory not found" in recs[0]["error"] or "not found" in str(recs)
+    assert (tmp_path / "run_1" / "summary.json").is_file()
+    assert "FAILED" in r.stdout + r.stderr
