@@ -1,10 +1,17 @@
-"""Shared fixtures: a tiny synthetic iiwa7 dataset for CLI smoke runs."""
+"""Shared fixtures: one torch thread (the suite's workloads are small), a tiny synthetic iiwa7 dataset."""
 
-import numpy as np
-import pytest
+import os
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+import torch  # noqa: E402
 
 from pathrl.dataset.io import save_dataset
-from pathrl.robot.model import load_robot_by_name
+from pathrl.robot.model import load_robot_by_name  # noqa: E402
+
+torch.set_num_threads(1)
 
 
 def smooth_paths(robot, n, seed):
@@ -24,5 +31,3 @@ def tiny_dataset(tmp_path_factory):
             "generator": {"kind": "synthetic"}, "source": "test"}
     save_dataset(dest, {"train": smooth_paths(robot, 6, 0), "test": smooth_paths(robot, 3, 1)}, meta)
     return dest
-
-
