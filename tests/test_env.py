@@ -98,13 +98,14 @@ def test_replace_path_mid_episode():
     env.step(torch.zeros(2, env.num_actions))  # and keeps running
 
 
-@pytest.mark.parametrize("end_obs", [False, True])
-def test_matches_numpy_reference_oracle(end_obs):
+@pytest.mark.parametrize(("end_obs", "end_tol"), [(False, None), (True, 0.05)])
+def test_matches_numpy_reference_oracle(end_obs, end_tol):
     """Same path, same actions: states, rewards and terminations of the batched env match the oracle.
 
     Tolerances: limits (torch vs klimits) and reference lookup (table vs spline) differ by < 1e-6.
     """
-    env, knots = make_env(num_envs=1, segments="full", episode_budget_s=30.0, end_obs=end_obs)
+    env, knots = make_env(num_envs=1, segments="full", episode_budget_s=30.0, end_obs=end_obs,
+                          end_tolerance=end_tol)
     robot = env.robot
     lim = JointLimits.from_robot(robot)
 
@@ -117,7 +118,7 @@ def test_matches_numpy_reference_oracle(end_obs):
                                                    env.paths.length[[0]].clone(), env.paths.num_knots[[0]] - 1))
     ref = ReferenceTrackingEnv(robot, path, 0.0, len(path.knots) - 1, build_reward_terms(REWARD),
                                knot_gap=env.knot_gap, budget_steps=int(env.budget[0]), braking=brake,
-                               end_obs=end_obs)
+                               end_obs=end_obs, end_tolerance=end_tol)
     rng = np.random.default_rng(0)
     np.testing.assert_allclose(env.get_observations()["policy"][0].numpy(), ref.observation(), atol=1e-5)
     for k in range(300):
@@ -134,3 +135,23 @@ def test_matches_numpy_reference_oracle(end_obs):
         np.testing.assert_allclose(env.vel[0].numpy(), ref.vel, atol=1e-6)
         np.testing.assert_allclose(env.get_observations()["policy"][0].numpy(), ref.observation(), atol=1e-4)
     assert r.terminated, "the oracle episode should end with a stop"
+
+
+def test_end_tolerance_counts_arrival_at_the_end_knot():
+    """A robot resting within end_tolerance of the end knot, with arc length still uncovered (it cut a
+    corner), has reached the end: it brakes and the episode ends with a stop; without the tolerance it stalls."""
+    for tol, expect in ((0.05, True), (None, False)):
+        env, _ = make_env(num_envs=1, segments="full", end_tolerance=tol, end_obs=True, scale_budget=False)
+        end_s = env.paths.length[[0]].clone()
+        seg = Segments(torch.tensor([0]), end_s - 0.03, end_s, env.paths.num_knots[[0]] - 1)
+        env.start_segments(torch.tensor([0]), seg)
+        env.pos[0, env.path_index] = env.end_q[0] + 0.01  # 0.01 rad per joint from the end knot
+        env._update_window()
+        stopped = False
+        for _ in range(5):
+            _, _, done, _ = env.step(torch.zeros(1, env.num_actions))
+            stopped = stopped or bool(env.last_step["stopped"][0])
+            if bool(done[0]):
+                break
+        assert bool(env.last_step["reached"][0]) is expect
+        assert stopped is expect

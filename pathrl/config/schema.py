@@ -110,6 +110,7 @@ class EnvCfg:
     stop_bonus: bool = True
     knot_obs: str = "relative"  # relative | absolute (paper)
     end_obs: bool = True  # vector to the end knot + arc length left, at knot-gap scale
+    end_tolerance: float | None = 0.05  # end reached within this weighted joint distance of the end knot (rad)
 
 
 @dataclass

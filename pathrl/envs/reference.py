@@ -54,7 +54,7 @@ class ReferenceTrackingEnv:
                  reward_terms: list[RewardTerm], knot_gap: float, n_state: int = 9, dt: float = 0.1,
                  substeps: int = 8, budget_steps: int = 160, stop_tolerance: float = 0.01,
                  stop_bonus: bool = True, max_deviation: float | None = None, braking=None,
-                 knot_obs: str = "relative", end_obs: bool = False) -> None:
+                 knot_obs: str = "relative", end_obs: bool = False, end_tolerance: float | None = None) -> None:
         self.robot, self.path, self.terms = robot, path, reward_terms
         self.dt, self.substeps, self.n_state = dt, substeps, n_state
         self.knot_gap, self.horizon = knot_gap, (n_state - 1) * knot_gap
@@ -63,6 +63,7 @@ class ReferenceTrackingEnv:
         self.braking_law = braking
         self.knot_obs = knot_obs
         self.end_obs = end_obs
+        self.end_tolerance = end_tolerance
         self.limiter = PosVelJerkLimitation(
             time_step=dt, pos_limits=robot.pos_limits.copy(),
             vel_limits=np.stack([-robot.vel_limits, robot.vel_limits], 1),
@@ -145,6 +146,9 @@ class ReferenceTrackingEnv:
         self.s = min(self.s + moved, self.end_s)
         self.steps += 1
         reached = self.s >= self.end_s - 1e-9
+        if self.end_tolerance is not None:
+            to_end = float(np.linalg.norm(self.w * (self.path.at(self.end_s) - self.pos[self.pi])))
+            reached = reached or (to_end <= self.end_tolerance and self.end_s - self.s < self.knot_gap)
         at_rest = np.all(np.abs(self.vel) < self.stop_tol) and np.all(np.abs(self.acc) < self.stop_tol)
         stopped = self.braking and bool(at_rest)
         self.braking = self.braking or reached

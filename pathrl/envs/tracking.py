@@ -22,6 +22,10 @@ Fixed step order (per env, batched; every tensor is (N, ...)):
   5. reward terms from (L_a, l_State, deviations, action); path position s += L_a (clipped at the end).
   6. reaching the end switches to braking from the next step; "stopped" (|v|, |a| < tol after braking)
      terminates; the step budget truncates (time out); optional deviation threshold terminates.
+     The end counts as reached when the covered arc length reaches the end knot's, or (``end_tolerance``)
+     when the robot is within that weighted joint distance of the end knot with less than one knot gap D
+     of arc length left: a path that cuts corners arrives with arc length to spare, and could otherwise
+     only "finish" by wandering around the end knot.
   7. terminating by a stop multiplies that step's reward by the remaining budget (paper: finishing
      early is never worse than idling to the time limit).
   8. finished envs are reset (new path segment); observations are built for all envs.
@@ -72,6 +76,7 @@ class TrackingEnvCfg:
     n_state: int = 9  # knots in the observation
     knot_obs: str = "relative"  # knots as seen from the robot (relative) or in joint space (absolute, paper)
     end_obs: bool = False  # add the vector to the end knot and the arc length left, both at knot-gap scale
+    end_tolerance: float | None = None  # also reached: within this (weighted, rad) of the end knot, < D arc left
     autoreset: bool = True
 
 
@@ -296,6 +301,9 @@ class PathTrackingEnv(_VecEnvBase):
 
         # 6. end of path -> braking; stop / deviation -> terminate; budget -> time out
         reached = self.s >= self.end_s - 1e-9
+        if cfg.end_tolerance is not None:  # corner cutting leaves arc length uncovered at the end knot
+            to_end = ((self.end_q - self.pos[:, self.path_index]) * self.dev_weights).norm(dim=1)
+            reached = reached | ((to_end <= cfg.end_tolerance) & (self.end_s - self.s < self.knot_gap))
         newly = reached & (self.finish_step < 0)
         self.finish_step = torch.where(newly, self.episode_length_buf, self.finish_step)
         stopped = self.braking & is_stopped(self.vel, self.acc, cfg.stop_tolerance)

@@ -45,7 +45,8 @@ def env_cfg_from(cfg: dict[str, Any], num_envs: int | None = None, seed: int | N
         knot_gap_norm=knot_gap_norm,
         n_state=int(cfg["knots"]["n_state"]),
         knot_obs=str(e.get("knot_obs", "relative")),
-        end_obs=bool(e.get("end_obs", False)),  # runs saved before this option existed did not have it
+        end_obs=bool(e.get("end_obs", False)),  # runs saved before these options existed did not have them
+        end_tolerance=None if e.get("end_tolerance") is None else float(e["end_tolerance"]),
     )
 
 
