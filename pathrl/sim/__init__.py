@@ -1,0 +1,1 @@
+"""Physics scenes (PyBullet) for the sensory-feedback tasks."""
