@@ -139,6 +139,32 @@ def bench_decision(robot_name: str, repeats: int = 300) -> dict:
             "max_pct_of_step": 100 * t.max() / 0.1}
 
 
+def bench_physics(scene_name: str, seconds: float) -> dict:
+    """PyBullet physics steps per second (240 Hz steps incl. motor commands) of one sensory-feedback scene."""
+    import numpy as np
+
+    if scene_name == "ball_on_plate":
+        from pathrl.sim.ball_plate import BallOnPlateScene
+
+        scene = BallOnPlateScene(load_robot_by_name("iiwa7"))
+        q = np.array([0.0, 0.5, 0.0, -1.0, 0.0, -1.5, 0.0])
+        scene.reset(q)
+    else:
+        from pathrl.sim.humanoid import StandingScene
+
+        scene = StandingScene(load_robot_by_name("armar4_legs"))
+        q = np.zeros(len(scene.joint_ids))
+        scene.reset(q)
+    block_q, block_v = np.tile(q, (24, 1)), np.zeros((24, len(q)))
+    steps, t0 = 0, time.perf_counter()
+    while time.perf_counter() - t0 < seconds:
+        scene.follow(block_q, block_v)
+        steps += 24
+    dt = time.perf_counter() - t0
+    scene.close()
+    return {"scene": scene_name, "physics_steps_per_s": steps / dt, "decisions_per_s": steps / 24 / dt}
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--seconds", type=float, default=5.0, help="time per env benchmark")
@@ -159,6 +185,8 @@ def main() -> None:
     res["decision_iiwa7"] = bench_decision("iiwa7")
     res["decision_armar4_legs"] = bench_decision("armar4_legs")
     res["decision_armar6"] = bench_decision("armar6")
+    res["physics_ball_on_plate"] = bench_physics("ball_on_plate", sec)
+    res["physics_armar4_standing"] = bench_physics("armar4_standing", sec)
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = out.with_suffix(".json.tmp")
@@ -185,6 +213,10 @@ def _print(res: dict, out: Path) -> None:
         d = res[k]
         t.add_row(f"policy + limits per decision, {d['robot']}",
                   f"{d['mean_ms']:.2f} ms (max {d['max_pct_of_step']:.1f} % of 0.1 s)")
+    for k in ("physics_ball_on_plate", "physics_armar4_standing"):
+        d = res[k]
+        t.add_row(f"PyBullet {d['scene']} (one client)", f"{d['physics_steps_per_s']:,.0f} physics steps/s "
+                  f"({d['decisions_per_s']:,.1f} decisions/s)")
     Console().print(t)
 
 
