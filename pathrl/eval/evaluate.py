@@ -91,8 +91,10 @@ def evaluate(
     gap = summary.get("knot_gap_norm")
     if gap is None:  # runs killed before their first summary: D of the training split, as in training
         gap = load_pathset(cfg["dataset"]["path"], "train", knots, robot=robot).max_knot_gap()
+    # The deviation cut-off is a training device; evaluation tracks every episode to its end or budget (as the
+    # authors evaluated), so a policy that leaves the path is not credited with a short episode.
     env_cfg = replace(env_cfg_from(cfg, num_envs=min(num_envs, episodes), seed=seed, knot_gap_norm=gap),
-                      autoreset=False, device="cpu")
+                      autoreset=False, device="cpu", max_deviation=None)
     env = PathTrackingEnv(env_cfg, robot, paths, build_reward_terms(cfg["reward"]["terms"]))
     policy = load_policy(cfg, env, ckpt)
 
