@@ -21,6 +21,7 @@ import numpy as np
 import pybullet as p
 
 from pathrl.robot.model import RobotSpec
+from pathrl.sim.scene import MotorScene, z_tilt_deg
 
 PLATE_SIZE = (0.3393, 0.2715, 0.002)  # logical plate size (m), the authors' BOARD_SIZE
 PLATE_BORDER = 0.03  # usable area ends this far inside the edge (m)
@@ -72,19 +73,13 @@ def plate_urdf(robot: RobotSpec) -> str:
     return text.replace("</robot>", plate, 1)
 
 
-class BallOnPlateScene:
+class BallOnPlateScene(MotorScene):
     """iiwa + plate + ball in its own PyBullet DIRECT client; deterministic for a given seed."""
 
     def __init__(self, robot: RobotSpec, seed: int = 0, control_rate: float = 240.0, motor_force: float = 500.0):
+        super().__init__(control_rate, motor_force)
         self.robot = robot
         self.rng = np.random.default_rng(seed)
-        self.control_dt = 1.0 / control_rate
-        self.motor_force = motor_force
-        self.cid = p.connect(p.DIRECT)
-        if self.cid < 0:
-            raise RuntimeError("pybullet: could not open a DIRECT client")
-        p.setGravity(0, 0, -9.81, physicsClientId=self.cid)
-        p.setTimeStep(self.control_dt, physicsClientId=self.cid)
         with tempfile.TemporaryDirectory() as tmp:
             path = Path(tmp) / f"{robot.name}_plate.urdf"
             path.write_text(plate_urdf(robot))
@@ -122,22 +117,7 @@ class BallOnPlateScene:
                          spinningFriction=bp.spinning_friction, physicsClientId=self.cid)
         return bp
 
-    def follow(self, q: np.ndarray, qd: np.ndarray) -> None:
-        """Track setpoints (K, D) positions and velocities, one physics step per control period."""
-        for qk, vk in zip(np.asarray(q, dtype=float), np.asarray(qd, dtype=float), strict=True):
-            self._hold(qk, vk)
-            p.stepSimulation(physicsClientId=self.cid)
-
-    def _hold(self, q: np.ndarray, qd: np.ndarray) -> None:
-        p.setJointMotorControlArray(self.body, self.joint_ids, p.POSITION_CONTROL,
-                                    targetPositions=[float(x) for x in q], targetVelocities=[float(x) for x in qd],
-                                    forces=[self.motor_force] * len(self.joint_ids), physicsClientId=self.cid)
-
     # ------------------------------------------------------------------ sensors
-    def joint_positions(self) -> np.ndarray:
-        """Measured joint positions (D,)."""
-        return np.array([s[0] for s in p.getJointStates(self.body, self.joint_ids, physicsClientId=self.cid)])
-
     def plate_pose(self) -> tuple[tuple[float, ...], tuple[float, ...]]:
         """World position and xyzw orientation of the plate centre."""
         s = p.getLinkState(self.body, self.plate_link, computeForwardKinematics=True, physicsClientId=self.cid)
@@ -145,9 +125,7 @@ class BallOnPlateScene:
 
     def plate_tilt_deg(self) -> float:
         """Angle between the plate normal and world z (deg)."""
-        _, orn = self.plate_pose()
-        z = np.asarray(p.getMatrixFromQuaternion(orn)).reshape(3, 3)[:, 2]
-        return float(np.degrees(np.arccos(np.clip(z[2], -1.0, 1.0))))
+        return z_tilt_deg(self.plate_pose()[1])
 
     def ball_on_plate(self) -> np.ndarray:
         """Ball in plate coordinates (3,): centre x, y (m) and the height of its lowest point above the surface."""
@@ -168,14 +146,3 @@ class BallOnPlateScene:
         b = self.ball_on_plate()
         inside = abs(b[0]) <= PLATE_SIZE[0] / 2 and abs(b[1]) <= PLATE_SIZE[1] / 2
         return bool(inside and -ON_PLATE_HEIGHT <= b[2] <= ON_PLATE_HEIGHT)
-
-    def close(self) -> None:
-        if self.cid is not None and self.cid >= 0:
-            p.disconnect(physicsClientId=self.cid)
-            self.cid = -1
-
-    def __enter__(self) -> BallOnPlateScene:
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.close()

@@ -13,25 +13,20 @@ import numpy as np
 import pybullet as p
 
 from pathrl.robot.model import RobotSpec
+from pathrl.sim.scene import MotorScene, z_tilt_deg
 
 PELVIS_LINK = "root"
 FALL_TILT_DEG = 30.0
 
 
-class StandingScene:
+class StandingScene(MotorScene):
     """A free-standing humanoid (ARMAR-4 URDFs) on a floor plane; deterministic for a given input."""
 
     def __init__(self, robot: RobotSpec, control_rate: float = 240.0, motor_force: float = 500.0,
                  fall_tilt_deg: float = FALL_TILT_DEG):
+        super().__init__(control_rate, motor_force)
         self.robot = robot
-        self.control_dt = 1.0 / control_rate
-        self.motor_force = motor_force
         self.fall_tilt_deg = fall_tilt_deg
-        self.cid = p.connect(p.DIRECT)
-        if self.cid < 0:
-            raise RuntimeError("pybullet: could not open a DIRECT client")
-        p.setGravity(0, 0, -9.81, physicsClientId=self.cid)
-        p.setTimeStep(self.control_dt, physicsClientId=self.cid)
         self.floor = p.createMultiBody(0, p.createCollisionShape(p.GEOM_PLANE, physicsClientId=self.cid),
                                        physicsClientId=self.cid)
         self.body = p.loadURDF(str(robot.urdf), useFixedBase=False, physicsClientId=self.cid)
@@ -55,23 +50,12 @@ class StandingScene:
         self._hold(q, np.zeros(len(self.joint_ids)))
         self._pelvis0 = self.pelvis_pose()[0]
 
-    def follow(self, q: np.ndarray, qd: np.ndarray) -> None:
-        """Track setpoints (K, D) positions and velocities, one physics step per control period."""
-        for qk, vk in zip(np.asarray(q, dtype=float), np.asarray(qd, dtype=float), strict=True):
-            self._hold(qk, vk)
-            p.stepSimulation(physicsClientId=self.cid)
-
     def push(self, force: tuple[float, float, float], seconds: float) -> None:
         """Push the pelvis with a world-frame force (N) for `seconds`, joints holding their current targets."""
         for _ in range(int(round(seconds / self.control_dt))):
             pos, _ = self.pelvis_pose()
             p.applyExternalForce(self.body, self.pelvis, force, tuple(pos), p.WORLD_FRAME, physicsClientId=self.cid)
             p.stepSimulation(physicsClientId=self.cid)
-
-    def _hold(self, q: np.ndarray, qd: np.ndarray) -> None:
-        p.setJointMotorControlArray(self.body, self.joint_ids, p.POSITION_CONTROL,
-                                    targetPositions=[float(x) for x in q], targetVelocities=[float(x) for x in qd],
-                                    forces=[self.motor_force] * len(self.joint_ids), physicsClientId=self.cid)
 
     # ------------------------------------------------------------------ sensors
     def pelvis_pose(self) -> tuple[np.ndarray, np.ndarray]:
@@ -85,19 +69,7 @@ class StandingScene:
 
     def tilt_deg(self) -> float:
         """Angle between the pelvis z axis and world z (deg)."""
-        z = np.asarray(p.getMatrixFromQuaternion(self.pelvis_pose()[1])).reshape(3, 3)[:, 2]
-        return float(np.degrees(np.arccos(np.clip(z[2], -1.0, 1.0))))
+        return z_tilt_deg(self.pelvis_pose()[1])
 
     def fallen(self) -> bool:
         return self.tilt_deg() > self.fall_tilt_deg
-
-    def close(self) -> None:
-        if self.cid is not None and self.cid >= 0:
-            p.disconnect(physicsClientId=self.cid)
-            self.cid = -1
-
-    def __enter__(self) -> StandingScene:
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.close()

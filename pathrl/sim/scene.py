@@ -1,0 +1,57 @@
+"""Shared PyBullet plumbing of the physics scenes: a DIRECT client stepping at the control rate, and joint
+position motors (target position and velocity) that follow setpoints."""
+
+from __future__ import annotations
+
+from typing import Self
+
+import numpy as np
+import pybullet as p
+
+
+def z_tilt_deg(orientation_xyzw) -> float:
+    """Angle between a frame's z axis and world z (deg)."""
+    z = np.asarray(p.getMatrixFromQuaternion(orientation_xyzw)).reshape(3, 3)[:, 2]
+    return float(np.degrees(np.arccos(np.clip(z[2], -1.0, 1.0))))
+
+
+class MotorScene:
+    """Base of the scenes: subclasses load their bodies and set ``body`` and ``joint_ids``."""
+
+    body: int
+    joint_ids: list[int]
+
+    def __init__(self, control_rate: float = 240.0, motor_force: float = 500.0):
+        self.control_dt = 1.0 / control_rate
+        self.motor_force = motor_force
+        self.cid = p.connect(p.DIRECT)
+        if self.cid < 0:
+            raise RuntimeError("pybullet: could not open a DIRECT client")
+        p.setGravity(0, 0, -9.81, physicsClientId=self.cid)
+        p.setTimeStep(self.control_dt, physicsClientId=self.cid)
+
+    def follow(self, q: np.ndarray, qd: np.ndarray) -> None:
+        """Track setpoints (K, D) positions and velocities, one physics step per control period."""
+        for qk, vk in zip(np.asarray(q, dtype=float), np.asarray(qd, dtype=float), strict=True):
+            self._hold(qk, vk)
+            p.stepSimulation(physicsClientId=self.cid)
+
+    def _hold(self, q: np.ndarray, qd: np.ndarray) -> None:
+        p.setJointMotorControlArray(self.body, self.joint_ids, p.POSITION_CONTROL,
+                                    targetPositions=[float(x) for x in q], targetVelocities=[float(x) for x in qd],
+                                    forces=[self.motor_force] * len(self.joint_ids), physicsClientId=self.cid)
+
+    def joint_positions(self) -> np.ndarray:
+        """Measured joint positions (D,)."""
+        return np.array([s[0] for s in p.getJointStates(self.body, self.joint_ids, physicsClientId=self.cid)])
+
+    def close(self) -> None:
+        if self.cid is not None and self.cid >= 0:
+            p.disconnect(physicsClientId=self.cid)
+            self.cid = -1
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
