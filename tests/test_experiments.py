@@ -36,7 +36,8 @@ def test_experiment_composes(name):
 
 def test_experiment_values():
     assert _compose(["+experiment=iiwa7_random_knots5"]).knots.n_state == 5
-    assert _compose(["+experiment=iiwa7_random_length_gt_deviation"]).reward.terms.path_length.weight == 4.0
+    assert _compose(["+experiment=iiwa7_random_length_eq_deviation"]).reward.terms.path_length.weight == 2.0
+    assert _compose(["+experiment=iiwa7_random"]).reward == _compose([]).reward  # Table I row = default config
     ball = _compose(["+experiment=iiwa7_ball_balancing"])
     assert (ball.env.segments, ball.knots.strategy, ball.knots.n_state) == ("full", "distance", 5)
     assert _compose(["+experiment=armar4_random"]).robot.name == "armar4"

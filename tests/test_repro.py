@@ -29,7 +29,7 @@ def synthetic_results() -> dict:
     """Fixed numbers for some rows (others missing): every branch of the renderer."""
     evs = {}
     for i, e in enumerate(evaluations()):
-        if e.model in ("iiwa7_random", "iiwa7_random_length_gt_deviation", "armar4_random"):
+        if e.model in ("iiwa7_random", "iiwa7_random_length_eq_deviation", "armar4_random"):
             m = {k: round(1.0 + 0.25 * i + 0.01 * j, 4) for j, k in enumerate(METRICS)}
             evs[e.id] = {**m, "episodes": 1200, "limit_violations": 0}
     bases = {b.id: {"toppra_duration_s": 2.5 + 0.1 * i, "toppra_max_joint_dev_rad": 1e-4}
@@ -98,7 +98,7 @@ def test_quick_profile_trains_evaluates_and_renders(tmp_path):
     """`make reproduce-tables PROFILE=quick TRAIN=1` on two rows: tiny datasets, tiny training, every output."""
     out = tmp_path / "quick"
     r = subprocess.run([sys.executable, "tools/reproduce_tables.py", "--profile", "quick", "--train",
-                        "--only", "iiwa7_random,iiwa7_random_length_gt_deviation", "--out", str(out)],
+                        "--only", "iiwa7_random,iiwa7_random_length_eq_deviation", "--out", str(out)],
                        cwd=ROOT, capture_output=True, text=True, timeout=900)
     assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
     md = (out / "tables.md").read_text()

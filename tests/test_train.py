@@ -46,7 +46,7 @@ def test_train_resume_and_eval(tiny_dataset, tmp_path):
     summary = json.loads((run_dir / "summary.json").read_text())
     assert summary["iterations"] == 4 and summary["env_steps"] == 4 * 32 * 8
     # resume with a different config is refused
-    r = run(train_cmd(tiny_dataset, run_dir, 5, "resume=true", "reward=length_gt_deviation"))
+    r = run(train_cmd(tiny_dataset, run_dir, 5, "resume=true", "reward=balanced"))
     assert r.returncode != 0 and "different config" in r.stderr
 
     out = tmp_path / "eval"
