@@ -125,3 +125,21 @@ def test_parallel_workers_give_identical_dataset(tmp_path):
     two = generate_dataset(robot_cfg("iiwa7"), cfg, dest=tmp_path / "w2", workers=2, progress=False)
     assert one.content_hash == two.content_hash
     assert two.meta["generation"]["workers"] == 2
+
+
+@pytest.mark.parametrize("approach", ["pursuit", "pd"])
+def test_target_point_approaches(tmp_path, checker, approach):
+    """The non-default target-point motions also give valid paths of the requested length."""
+    spec = load_robot_by_name("iiwa7")
+    cfg = dataset_cfg("target_point", length_range=[5.0, 6.0], approach=approach)
+    ds = generate_dataset(robot_cfg("iiwa7"), cfg, dest=tmp_path / approach, progress=False)
+    assert ds.meta["generator"]["params"]["approach"] == approach
+    _check_paths(load_dataset(tmp_path / approach, spec), spec, checker, 5.0, 6.0)
+
+
+@pytest.mark.parametrize("params, msg", [({"approach": "teleport"}, "approach"), ({"cruise": 0.0}, "cruise")])
+def test_target_point_bad_params(tmp_path, params, msg):
+    with pytest.raises(DatasetError, match=msg):
+        generate_dataset(robot_cfg("iiwa7"), dataset_cfg("target_point", **params), dest=tmp_path / "x",
+                         progress=False)
+    assert not (tmp_path / "x").exists()

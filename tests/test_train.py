@@ -93,3 +93,28 @@ def test_bad_inputs(tiny_dataset, tmp_path):
     assert r.returncode == 2 and "integer" in r.stderr
     r = run(train_cmd(tmp_path / "missing_dataset", tmp_path / "r", 1))
     assert r.returncode == 2 and "error" in r.stderr
+
+
+def test_ball_task_warm_start_train_and_pybullet_eval(tiny_dataset, tmp_path):
+    """Tracking run -> warm-started ball run (analytic ball model) -> evaluation in PyBullet, all from the CLI."""
+    src, ball = tmp_path / "tracking", tmp_path / "ball"
+    r = run(train_cmd(tiny_dataset, src, 1))
+    assert r.returncode == 0, r.stderr[-2000:]
+    r = run(train_cmd(tiny_dataset, ball, 1, "task=ball_on_plate", "reward=ball_balancing", f"init_from={src}"))
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert "ball_centre" in json.dumps(scalars(ball)[0])
+    out = tmp_path / "eval"
+    r = run([str(BIN / "pathrl-eval"), f"run_dir={ball}", "episodes=2", "segments=full", f"out={out}",
+             "record=false"])
+    assert r.returncode == 0, r.stderr[-2000:]
+    m = json.loads((out / "metrics.json").read_text())
+    assert m["task"] == {"name": "ball_on_plate", "backend": "PyBulletBall", "observed": True}
+    assert 0.0 <= m["task_failed_pct"] <= 100.0 and len(m["per_episode"]) == 2
+    # the tracking run evaluated with the ball riding along unobserved
+    r = run([str(BIN / "pathrl-eval"), f"run_dir={src}", "episodes=2", "segments=full", f"out={out}",
+             "record=false", "task=ball_on_plate", "backend=analytic"])
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert json.loads((out / "metrics.json").read_text())["task"]["observed"] is False
+    # a warm start from nowhere is one clear line
+    r = run(train_cmd(tiny_dataset, tmp_path / "x", 1, f"init_from={tmp_path / 'missing'}"))
+    assert r.returncode != 0 and "init_from" in r.stderr.strip().splitlines()[-1]

@@ -2,6 +2,10 @@
 
     pathrl-eval run_dir=models/iiwa7_random [dataset=NAME | dataset.path=DIR] [split=test]
                 [episodes=N] [segments=paper|full] [seed=0] [out=DIR]
+                [task=ball_on_plate] [backend=pybullet|analytic]
+
+``task`` adds a feedback task to a run trained without one (its sensor values stay unobserved); runs with
+a task are simulated with ``backend`` (default PyBullet).
 """
 
 from __future__ import annotations
@@ -11,8 +15,10 @@ from pathlib import Path
 from pathrl.cli.common import UserError, run_cli
 
 USAGE = ("usage: pathrl-eval run_dir=RUN [dataset=NAME | dataset.path=DIR] [split=test] [episodes=N] "
-         "[segments=paper|full] [seed=S] [out=DIR] [record=true|false]")
-KEYS = {"run_dir", "dataset", "dataset.path", "split", "episodes", "segments", "seed", "out", "record", "num_envs"}
+         "[segments=paper|full] [seed=S] [out=DIR] [record=true|false] [task=ball_on_plate] "
+         "[backend=pybullet|analytic]")
+KEYS = {"run_dir", "dataset", "dataset.path", "split", "episodes", "segments", "seed", "out", "record", "num_envs",
+        "task", "backend"}
 
 
 def parse_args(argv: list[str]) -> dict[str, str]:
@@ -49,6 +55,10 @@ def _main(argv: list[str]) -> None:
     segments = args.get("segments", "paper")
     if segments not in ("paper", "full"):
         raise UserError(f"segments must be paper or full, got {segments!r}")
+    if args.get("task", "ball_on_plate") not in ("ball_on_plate", "tracking"):
+        raise UserError(f"task must be ball_on_plate or tracking, got {args['task']!r}")
+    if args.get("backend", "pybullet") not in ("pybullet", "analytic"):
+        raise UserError(f"backend must be pybullet or analytic, got {args['backend']!r}")
     episodes = _int(args, "episodes", None)
     if episodes is not None and episodes < 1:
         raise UserError(f"episodes must be >= 1, got {episodes}")
@@ -64,7 +74,8 @@ def _main(argv: list[str]) -> None:
         m = evaluate(run_dir, dataset_path, args.get("split", "test"), episodes, segments,
                      _int(args, "seed", 0) or 0, Path(args["out"]) if "out" in args else None,
                      num_envs=_int(args, "num_envs", 1200) or 1200,
-                     record=args.get("record", "true").lower() != "false")
+                     record=args.get("record", "true").lower() != "false",
+                     task=args.get("task"), backend=args.get("backend", "pybullet"))
     except (RunError, DatasetError) as exc:
         raise UserError(str(exc)) from None
     _print_table(m)
@@ -80,7 +91,9 @@ def _print_table(m: dict) -> None:
     for k in ("duration_s", "joint_dev_mean_rad", "joint_dev_max_rad", "joint_dev_final_rad",
               "cart_pos_dev_mean_cm", "cart_pos_dev_max_cm", "cart_pos_dev_final_cm",
               "cart_rot_dev_mean_deg", "cart_rot_dev_max_deg", "cart_rot_dev_final_deg",
-              "terminated_early_pct", "limit_violations"):
+              "terminated_early_pct", "task_failed_pct", "limit_violations"):
+        if k not in m:
+            continue
         v = m[k]
         t.add_row(k, f"{v:.3f}" if isinstance(v, float) else str(v))
     Console().print(t)

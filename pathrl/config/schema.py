@@ -114,6 +114,18 @@ class EnvCfg:
 
 
 @dataclass
+class TaskCfg:
+    """Sensory-feedback task (``conf/task/*.yaml``): ``feedback: null`` is plain path tracking."""
+
+    name: str = "tracking"
+    feedback: str | None = None  # ball_on_plate
+    backend: str = "analytic"  # analytic (batched torch model, training) | pybullet (worker processes)
+    workers: int = 2  # pybullet worker processes
+    observe: bool = True  # sensor values in the state
+    fail_terminates: bool = True  # the task's failure (ball off the plate) ends the episode
+
+
+@dataclass
 class StdAnnealCfg:
     """Cap on the policy's action noise: from ``start`` (fraction of the iterations) it falls log-linearly from the
     initial std to ``final`` at the last iteration."""
@@ -131,6 +143,7 @@ class TrainAppCfg:
     knots: KnotsCfg = field(default_factory=KnotsCfg)
     reward: RewardCfg = field(default_factory=RewardCfg)
     env: EnvCfg = field(default_factory=EnvCfg)
+    task: TaskCfg = field(default_factory=TaskCfg)
     agent: dict[str, Any] = field(default_factory=dict)  # RSL-RL train cfg, keys verbatim
     experiment: str = MISSING
     seed: int = 0
@@ -140,3 +153,4 @@ class TrainAppCfg:
     resume: bool = False
     run_dir: str = MISSING
     std_anneal: StdAnnealCfg | None = field(default_factory=lambda: StdAnnealCfg())
+    init_from: str | None = None  # warm start: actor/critic weights of this run or model dir (new inputs start at 0)

@@ -8,7 +8,7 @@ non-negative (as in the paper), so ending an episode early never pays off.
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import torch
@@ -26,6 +26,7 @@ class StepQuantities:
     dev_max, dev_mean: weighted joint-space deviation from the reference over the step (rad).
     action_absmax: max_j |action_j| (raw action, before clipping).
     close_to_end: the window already reaches the path's end knot.
+    task: named (N,) values of the env's feedback source (e.g. ``ball_dist``); empty without one.
     """
 
     moved: Tensor
@@ -35,6 +36,7 @@ class StepQuantities:
     dev_mean: Tensor
     action_absmax: Tensor
     close_to_end: Tensor
+    task: Mapping[str, Tensor] = field(default_factory=dict)
 
 
 def path_length(q: StepQuantities, overshoot_factor: float = 1.0) -> Tensor:
@@ -77,6 +79,17 @@ def action_saturation(q: StepQuantities, threshold: float = 0.9) -> Tensor:
     return torch.where(q.close_to_end, torch.ones_like(r), r)
 
 
+def ball_centre(q: StepQuantities, margin: float = 0.06) -> Tensor:
+    """Ball-on-plate reward: (1 - min(1, d / (1 - margin)))^2 while the ball is on the plate, else 0.
+
+    d = distance of the ball from the plate centre relative to the usable half-size (task value
+    ``ball_dist``). The authors used the signed coordinates (only +x / +y offsets were penalized); the
+    distance penalizes every direction (issue 5).
+    """
+    d, on = q.task["ball_dist"], q.task["ball_on_plate"]
+    return (1.0 - (d / (1.0 - margin)).clamp(max=1.0)) ** 2 * on
+
+
 RewardFn = Callable[..., Tensor]
 
 REWARD_TERMS: dict[str, RewardFn] = {
@@ -84,7 +97,11 @@ REWARD_TERMS: dict[str, RewardFn] = {
     "deviation_max": deviation_max,
     "deviation_mean": deviation_mean,
     "action_saturation": action_saturation,
+    "ball_centre": ball_centre,
 }
+
+#: Feedback values (StepQuantities.task) a term reads; the env refuses terms its feedback cannot serve.
+TASK_VALUES: dict[str, tuple[str, ...]] = {"ball_centre": ("ball_dist", "ball_on_plate")}
 
 
 @dataclass(frozen=True)

@@ -13,15 +13,21 @@ MDP (paper, Sec. III; original_pathtracking.md 3-7):
   action  one value in [-1, 1] per joint, mapped into the valid acceleration range for the end of the
           next 0.1 s step (jerk/acceleration/velocity/position limits, braking stays possible).
   reward  sum of weighted terms (pathrl.envs.rewards): path length R_l and deviation R_d (+ task terms).
+  task    optional sensory feedback (pathrl.envs.feedback, e.g. a ball on a plate): it sees the step's
+          control-rate setpoints, adds its sensor values to the state (``feedback_obs``), named values
+          for task reward terms, and a failure (ball off the plate) that ends the episode
+          (``fail_terminates``).
 
 Fixed step order (per env, batched; every tensor is (N, ...)):
   1. clip actions; a1 = a_min + (1 + action) / 2 (a_max - a_min); envs in braking mode use the braking law.
   2. integrate with linearly interpolated acceleration: `substeps` intermediate positions + end state.
   3. progress: arc length L_a of the polyline through the step's positions (path joints).
   4. deviation: each intermediate position vs the reference at the same arc length from the step start.
-  5. reward terms from (L_a, l_State, deviations, action); path position s += L_a (clipped at the end).
+  5. feedback (if any) follows the step's control-rate setpoints; reward terms from (L_a, l_State,
+     deviations, action, feedback values); path position s += L_a (clipped at the end).
   6. reaching the end switches to braking from the next step; "stopped" (|v|, |a| < tol after braking)
-     terminates; the step budget truncates (time out); optional deviation threshold terminates.
+     terminates; the step budget truncates (time out); optional deviation threshold and task failure
+     terminate.
      The end counts as reached when the covered arc length reaches the end knot's, or (``end_tolerance``)
      when the robot is within that weighted joint distance of the end knot with less than one knot gap D
      of arc length left: a path that cuts corners arrives with arc length to spare, and could otherwise
@@ -40,7 +46,8 @@ import torch
 from tensordict import TensorDict
 from torch import Tensor
 
-from pathrl.envs.rewards import RewardTerm, StepQuantities
+from pathrl.envs.feedback import Feedback
+from pathrl.envs.rewards import TASK_VALUES, RewardTerm, StepQuantities
 from pathrl.limits.braking import braking_within, is_stopped
 from pathrl.limits.feasible import JointLimits, action_to_acceleration, valid_acceleration_range
 from pathrl.limits.integrate import end_of_step, interpolate_step
@@ -77,10 +84,12 @@ class TrackingEnvCfg:
     knot_obs: str = "relative"  # knots as seen from the robot (relative) or in joint space (absolute, paper)
     end_obs: bool = False  # add the vector to the end knot and the arc length left, both at knot-gap scale
     end_tolerance: float | None = None  # also reached: within this (weighted, rad) of the end knot, < D arc left
+    feedback_obs: bool = True  # with a feedback source: its sensor values are part of the state
+    fail_terminates: bool = True  # with a feedback source: its failure (ball off the plate) ends the episode
     autoreset: bool = True
 
 
-TERMINATION_REASONS = ("robot_stopped", "deviation", "time_out")
+TERMINATION_REASONS = ("robot_stopped", "deviation", "task_failed", "time_out")
 
 
 class PathTrackingEnv(_VecEnvBase):
@@ -92,8 +101,11 @@ class PathTrackingEnv(_VecEnvBase):
         robot: RobotSpec,
         paths: PathSet,
         reward_terms: list[RewardTerm],
+        feedback: Feedback | None = None,
     ) -> None:
         self.cfg = cfg
+        self.feedback = feedback
+        self.control_steps = int(round(cfg.control_rate * cfg.dt))
         self.robot = robot
         self.device = torch.device(cfg.device)
         self.num_envs = n = cfg.num_envs
@@ -102,6 +114,12 @@ class PathTrackingEnv(_VecEnvBase):
         self.generator.manual_seed(cfg.seed)
         self.limits = JointLimits.from_robot(robot, device=self.device)
         self.reward_terms = reward_terms
+        have = set(feedback.value_names) if feedback is not None else set()
+        for t in reward_terms:
+            missing = [v for v in TASK_VALUES.get(t.fn.__name__, ()) if v not in have]
+            if missing:
+                raise ValueError(f"reward term {t.name!r} needs a task feedback providing {missing} "
+                                 "(e.g. task=ball_on_plate)")
         self.paths = paths.to(self.device)
         if self.paths.dof != robot.path_dof:
             raise ValueError(f"paths have {self.paths.dof} joints, robot {robot.name} has {robot.path_dof} path joints")
@@ -168,6 +186,8 @@ class PathTrackingEnv(_VecEnvBase):
         self.finish_step[env_ids] = -1
         for v in self.ep_reward.values():
             v[env_ids] = 0.0
+        if self.feedback is not None:
+            self.feedback.reset(env_ids, pos)
         self.ep_dev_sum[env_ids] = 0.0
         self.ep_dev_max[env_ids] = 0.0
         frac = (seg.end_s - seg.start_s) / self.paths.length[seg.path]
@@ -237,6 +257,8 @@ class PathTrackingEnv(_VecEnvBase):
             to_end = (self.end_q - self.pos[:, self.path_index]) / self.knot_gap
             left = 2.0 * ((self.end_s - self.s) / self.knot_gap).clamp(0.0, 1.0) - 1.0
             parts += [to_end, left.unsqueeze(1)]
+        if self.feedback is not None and self.cfg.feedback_obs:
+            parts.append(self.feedback.observe().to(self.pos.dtype))
         obs = torch.cat(parts, dim=1)
         return obs.clamp(-1.0, 1.0).to(torch.float32)
 
@@ -276,7 +298,15 @@ class PathTrackingEnv(_VecEnvBase):
         moving = moved > 1e-12
         dev_mean = torch.where(moving, (dev * seg_len).sum(1) / moved.clamp(min=1e-12), dev.mean(dim=1))
 
-        # 5. reward
+        # 5. feedback, reward
+        task: dict[str, Tensor] = {}
+        failed = torch.zeros_like(moving)
+        if self.feedback is not None:
+            q_c, v_c, _ = interpolate_step(self.pos, self.vel, self.acc, a1, cfg.dt, self.control_steps)
+            fb = self.feedback.step(q_c, v_c)
+            task = fb.values
+            if fb.failed is not None:
+                failed = fb.failed.to(self.device)
         q = StepQuantities(
             moved=moved,
             l_state=(self.l_obs - self.s).clamp(min=0.0),
@@ -285,6 +315,7 @@ class PathTrackingEnv(_VecEnvBase):
             dev_mean=dev_mean,
             action_absmax=action_absmax,
             close_to_end=self.close_to_end,
+            task=task,
         )
         reward = torch.zeros_like(moved)
         for term in self.reward_terms:
@@ -313,6 +344,8 @@ class PathTrackingEnv(_VecEnvBase):
         if cfg.max_deviation is not None:
             dev_term = dev_max > cfg.max_deviation
             terminated = terminated | dev_term
+        task_term = failed & ~terminated if cfg.fail_terminates else torch.zeros_like(failed)
+        terminated = terminated | task_term
         time_outs = (self.episode_length_buf >= self.budget) & ~terminated
 
         # 7. finishing early is worth the rest of the budget
@@ -323,15 +356,17 @@ class PathTrackingEnv(_VecEnvBase):
         dones = terminated | time_outs
         self.last_step = {
             "moved": moved, "dev_max": dev_max, "dev_mean": dev_mean, "stopped": stopped,
-            "dev_terminated": dev_term, "time_outs": time_outs, "reached": reached,
+            "dev_terminated": dev_term, "task_failed": task_term, "time_outs": time_outs, "reached": reached,
+            **{f"task/{k}": v for k, v in task.items()},
         }
-        extras = {"time_outs": time_outs, "log": self._episode_log(dones, stopped, dev_term, time_outs)}
+        extras = {"time_outs": time_outs, "log": self._episode_log(dones, stopped, dev_term, task_term, time_outs)}
         if cfg.autoreset:
             self._reset_envs(dones.nonzero().squeeze(1), refresh=False)
         self._update_window()
         return self.get_observations(), reward.to(torch.float32), dones, extras
 
-    def _episode_log(self, dones: Tensor, stopped: Tensor, dev_term: Tensor, time_outs: Tensor) -> dict:
+    def _episode_log(self, dones: Tensor, stopped: Tensor, dev_term: Tensor, task_term: Tensor,
+                     time_outs: Tensor) -> dict:
         """Per-term episode rewards and termination shares over the episodes that ended in this step."""
         n_done = int(dones.sum())
         if n_done == 0:
@@ -342,6 +377,8 @@ class PathTrackingEnv(_VecEnvBase):
         steps = self.episode_length_buf[dones].to(torch.float64)
         log["Episode_Termination/robot_stopped"] = stopped[dones].float().mean()
         log["Episode_Termination/deviation"] = dev_term[dones].float().mean()
+        if self.feedback is not None:
+            log["Episode_Termination/task_failed"] = task_term[dones].float().mean()
         log["Episode_Termination/time_out"] = time_outs[dones].float().mean()
         log["Metrics/duration_s"] = (steps * self.cfg.dt)[stopped[dones]].mean() if bool(stopped.any()) else 0.0
         log["Metrics/dev_mean_rad"] = (self.ep_dev_sum[dones] / steps).mean()
@@ -351,4 +388,5 @@ class PathTrackingEnv(_VecEnvBase):
     def describe(self) -> dict:
         """JSON-able summary of the env (saved with runs)."""
         return {"cfg": asdict(self.cfg), "robot": self.robot.name, "num_obs": self.num_obs,
+                "feedback": None if self.feedback is None else self.feedback.name,
                 "num_actions": self.num_actions, "knot_gap_norm": self.knot_gap}

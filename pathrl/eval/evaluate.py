@@ -25,7 +25,7 @@ from pathrl.paths.knots import KnotStrategy
 from pathrl.paths.segments import evaluation_plan
 from pathrl.robot.kinematics import ForwardKinematics
 from pathrl.robot.model import RobotSpec, load_robot
-from pathrl.train.runner import PathRLRunner, env_cfg_from, latest_checkpoint, rsl_train_cfg
+from pathrl.train.runner import PathRLRunner, env_cfg_from, latest_checkpoint, make_feedback, rsl_train_cfg, task_cfg
 
 
 class RunError(ValueError):
@@ -77,10 +77,25 @@ def evaluate(
     num_envs: int = 1200,
     record: bool = True,
     progress: bool = True,
+    task: str | None = None,
+    backend: str = "pybullet",
 ) -> dict[str, Any]:
-    """Evaluate the policy of `run_dir` deterministically; write metrics.json (+ episodes.mcap)."""
+    """Evaluate the policy of `run_dir` deterministically; write metrics.json (+ episodes.mcap).
+
+    Runs with a feedback task are evaluated with the `backend` simulator (PyBullet by default, whatever
+    they were trained with). `task` adds a task to a run trained without one (e.g. ``ball_on_plate``: the
+    ball rides along unobserved, as the paper's "no balancing reward" row). A task failure (ball off the
+    plate) does not end an evaluation episode: the tracking metrics cover the whole path and the failure
+    is reported per episode (``task_failed``) and as ``task_failed_pct``.
+    """
     torch.set_num_threads(int(os.environ.get("PATHRL_THREADS", "1")))
     cfg, ckpt, summary = load_run(run_dir)
+    trained_task = task_cfg(cfg)
+    if task is not None and task != "tracking":
+        if trained_task["feedback"] not in (None, task):
+            raise RunError(f"task={task}: the run was trained with task {trained_task['feedback']}")
+        observe = trained_task["feedback"] == task and trained_task["observe"]
+        cfg = {**cfg, "task": {**trained_task, "name": task, "feedback": task, "observe": observe}}
     robot = load_robot(cfg["robot"])
     knots = KnotStrategy.from_cfg(cfg["knots"])
     ds_path = dataset_path or cfg["dataset"]["path"]
@@ -93,22 +108,50 @@ def evaluate(
         gap = load_pathset(cfg["dataset"]["path"], "train", knots, robot=robot).max_knot_gap()
     # The deviation cut-off is a training device; evaluation tracks every episode to its end or budget (as the
     # authors evaluated), so a policy that leaves the path is not credited with a short episode.
+    has_task = task_cfg(cfg)["feedback"] is not None
+    if has_task and backend == "pybullet":
+        num_envs = min(num_envs, PYBULLET_ENVS)  # one PyBullet client per env
     env_cfg = replace(env_cfg_from(cfg, num_envs=min(num_envs, episodes), seed=seed, knot_gap_norm=gap),
-                      autoreset=False, device="cpu", max_deviation=None)
-    env = PathTrackingEnv(env_cfg, robot, paths, build_reward_terms(cfg["reward"]["terms"]))
-    policy = load_policy(cfg, env, ckpt)
+                      autoreset=False, device="cpu", max_deviation=None, fail_terminates=False)
+    feedback = make_feedback(cfg, robot, env_cfg.num_envs, seed, backend) if has_task else None
+    try:
+        env = PathTrackingEnv(env_cfg, robot, paths, build_reward_terms(cfg["reward"]["terms"]), feedback)
+        policy = load_policy(cfg, env, ckpt)
+        t0 = time.perf_counter()
+        records = _run(env, policy, plan, episodes, progress)
+        rollout_s = time.perf_counter() - t0
+    finally:
+        if feedback is not None:
+            feedback.close()
+    return _finish(records, rollout_s, env, robot, paths, ds_path, split, segments, seed, run_dir, ckpt, out_dir,
+                   record, cfg if has_task else None)
 
-    t0 = time.perf_counter()
+
+#: Parallel envs (= PyBullet clients, spread over the worker processes) when evaluating in PyBullet.
+PYBULLET_ENVS = 100
+
+
+def _run(env: PathTrackingEnv, policy, plan, episodes: int, progress: bool) -> list[EpisodeRecord]:
     bar = _progress(episodes) if progress else None
     records = rollout(env, policy, plan, progress=(lambda k: bar[0].update(bar[1], advance=k)) if bar else None)
     if bar:
         bar[0].stop()
-    rollout_s = time.perf_counter() - t0
+    return records
+
+
+def _finish(records, rollout_s, env, robot, paths, ds_path, split, segments, seed, run_dir, ckpt, out_dir, record,
+            task_run_cfg) -> dict[str, Any]:
+    """Per-episode and aggregate metrics of the rollouts; writes metrics.json (+ episodes.mcap)."""
+    t0 = time.perf_counter()
     fk = ForwardKinematics(robot)
     limits = JointLimits.from_robot(robot)
     per_episode = [_episode_metrics(r, env, fk, limits, robot, paths) for r in records]
     metrics = _aggregate(per_episode, robot, ds_path, split, segments, seed)
-    metrics["eval_wall_time_s"] = time.perf_counter() - t0
+    if task_run_cfg is not None:
+        t = task_cfg(task_run_cfg)
+        metrics["task"] = {"name": t["name"], "backend": type(env.feedback).__name__, "observed": t["observe"]}
+        metrics["task_failed_pct"] = 100.0 * float(np.mean([p["task_failed"] for p in per_episode]))
+    metrics["eval_wall_time_s"] = time.perf_counter() - t0 + rollout_s
     metrics["rollout_wall_time_s"] = rollout_s
     metrics["run_dir"] = str(run_dir)
     metrics["checkpoint"] = ckpt.name
@@ -144,6 +187,8 @@ def _episode_metrics(r: EpisodeRecord, env: PathTrackingEnv, fk: ForwardKinemati
         "duration_end_of_path_s": r.finish_step * r.extra["dt"] if r.finish_step >= 0 else None,
         "termination": r.termination,
         "terminated_early": r.termination != "robot_stopped",
+        # the ball's on-plate flag is sticky: 0 at the end <=> it fell at some point
+        **({"task_failed": r.extra["task"].get("ball_on_plate", 1.0) < 0.5} if r.extra.get("task") else {}),
         **dev,
         "limit_violations": int(viol["total"]),
     }

@@ -26,7 +26,7 @@ class EpisodeRecord:
     start_s: float
     end_s: float
     steps: int
-    termination: str  # robot_stopped | deviation | time_out
+    termination: str  # robot_stopped | deviation | task_failed | time_out
     reached_end: bool
     finish_step: int  # step in which the end of the path was reached (-1: never)
     pos: Tensor  # (T+1, D) decision-step states
@@ -67,6 +67,7 @@ def _rollout_batch(env: PathTrackingEnv, policy: Policy, plan: Segments, ids: Te
     active[:k] = True
     done_step = torch.full((env.num_envs,), -1, dtype=torch.long, device=dev)
     term = ["time_out"] * k
+    task_end: list[dict[str, float]] = [{} for _ in range(k)]  # feedback values when the episode ended
     states = [(env.pos.clone(), env.vel.clone(), env.acc.clone())]
     max_steps = int(math.ceil(float(env.budget[:k].max()))) + 1
     for t in range(max_steps):
@@ -80,7 +81,10 @@ def _rollout_batch(env: PathTrackingEnv, policy: Policy, plan: Segments, ids: Te
             info = env.last_step
             for i in newly.nonzero().squeeze(1).tolist():
                 term[i] = ("robot_stopped" if bool(info["stopped"][i]) else
-                           "deviation" if bool(info["dev_terminated"][i]) else "time_out")
+                           "deviation" if bool(info["dev_terminated"][i]) else
+                           "task_failed" if bool(info["task_failed"][i]) else "time_out")
+                if i < k:
+                    task_end[i] = {key[5:]: float(v[i]) for key, v in info.items() if key.startswith("task/")}
         if bool((done_step[:k] >= 0).all()):
             break
     pos = torch.stack([s[0] for s in states], 1)  # (N, T+1, D)
@@ -104,6 +108,6 @@ def _rollout_batch(env: PathTrackingEnv, policy: Policy, plan: Segments, ids: Te
             setpoints=torch.cat([p[:1], sp.reshape(-1, p.shape[1])]).cpu(),
             setpoint_vel=torch.cat([v[:1], sv.reshape(-1, p.shape[1])]).cpu(),
             setpoint_acc=torch.cat([a[:1], sa.reshape(-1, p.shape[1])]).cpu(),
-            extra={"dt": env.cfg.dt, "control_dt": env.cfg.dt / c},
+            extra={"dt": env.cfg.dt, "control_dt": env.cfg.dt / c, "task": task_end[i]},
         ))
     return out

@@ -20,15 +20,12 @@ from pathlib import Path
 import numpy as np
 import pybullet as p
 
+from pathrl.envs.feedback import PLACE_MARGIN, PLATE_SIZE, USABLE_HALF
 from pathrl.robot.model import RobotSpec
 from pathrl.sim.scene import MotorScene, z_tilt_deg
 
-PLATE_SIZE = (0.3393, 0.2715, 0.002)  # logical plate size (m), the authors' BOARD_SIZE
-PLATE_BORDER = 0.03  # usable area ends this far inside the edge (m)
-PLACE_MARGIN = 0.06  # initial ball position keeps this far inside the usable area (m)
 PLATE_MASS = 0.508  # kg
 ON_PLATE_HEIGHT = 0.01  # m
-USABLE_HALF = (PLATE_SIZE[0] / 2 - PLATE_BORDER, PLATE_SIZE[1] / 2 - PLATE_BORDER)  # (0.13965, 0.10575)
 
 
 @dataclass(frozen=True)

@@ -47,7 +47,39 @@ def env_cfg_from(cfg: dict[str, Any], num_envs: int | None = None, seed: int | N
         knot_obs=str(e.get("knot_obs", "relative")),
         end_obs=bool(e.get("end_obs", False)),  # runs saved before these options existed did not have them
         end_tolerance=None if e.get("end_tolerance") is None else float(e["end_tolerance"]),
+        feedback_obs=bool(task_cfg(cfg)["observe"]),
+        fail_terminates=bool(task_cfg(cfg)["fail_terminates"]),
     )
+
+
+#: The task of configs saved before tasks existed (plain tracking).
+NO_TASK = {"name": "tracking", "feedback": None, "backend": "analytic", "workers": 2, "observe": True,
+           "fail_terminates": True}
+FEEDBACK_BACKENDS = ("analytic", "pybullet")
+
+
+def task_cfg(cfg: dict[str, Any]) -> dict[str, Any]:
+    return {**NO_TASK, **(cfg.get("task") or {})}
+
+
+def make_feedback(cfg: dict[str, Any], robot: RobotSpec, num_envs: int, seed: int, backend: str | None = None):
+    """The feedback source of a config's task (None for plain tracking); `backend` overrides task.backend."""
+    t = task_cfg(cfg)
+    if t["feedback"] is None:
+        return None
+    if t["feedback"] != "ball_on_plate":
+        raise ValueError(f"task.feedback: unknown {t['feedback']!r}; known: ['ball_on_plate']")
+    backend = backend or t["backend"]
+    rate = float(cfg["env"]["control_rate"])
+    if backend == "analytic":
+        from pathrl.envs.feedback import AnalyticBall
+
+        return AnalyticBall(robot, num_envs, rate, seed=seed, device=str(cfg.get("device", "cpu")))
+    if backend == "pybullet":
+        from pathrl.sim.vec import PyBulletBall
+
+        return PyBulletBall(robot, num_envs, rate, seed=seed, workers=int(t["workers"]))
+    raise ValueError(f"task.backend: expected one of {list(FEEDBACK_BACKENDS)}, got {backend!r}")
 
 
 def build_env(
@@ -63,7 +95,8 @@ def build_env(
     knots = KnotStrategy.from_cfg(cfg["knots"])
     paths = load_pathset(dataset_path or cfg["dataset"]["path"], split, knots, robot=robot)
     env_cfg = env_cfg_from(cfg, num_envs, seed, knot_gap_norm)
-    return PathTrackingEnv(env_cfg, robot, paths, build_reward_terms(cfg["reward"]["terms"]))
+    feedback = make_feedback(cfg, robot, env_cfg.num_envs, env_cfg.seed)
+    return PathTrackingEnv(env_cfg, robot, paths, build_reward_terms(cfg["reward"]["terms"]), feedback)
 
 
 def rsl_train_cfg(cfg: dict[str, Any], run_dir: Path) -> dict[str, Any]:
@@ -152,6 +185,8 @@ def train(cfg: dict[str, Any], run_dir: Path, resume: bool = False) -> dict[str,
         raise FileExistsError(f"{run_dir} already holds checkpoints; pass resume=true or choose another run_dir")
     if resume and (run_dir / "config.yaml").exists():
         saved = yaml.safe_load((run_dir / "config.yaml").read_text())
+        saved.setdefault("task", NO_TASK)  # runs from before tasks / warm starts existed
+        saved.setdefault("init_from", None)
         diff = _config_diff(saved, cfg, ignore={"resume", "iterations"})
         if diff:
             raise ValueError(f"resume with a different config ({diff}); use the same overrides or a new run_dir")
@@ -171,6 +206,11 @@ def train(cfg: dict[str, Any], run_dir: Path, resume: bool = False) -> dict[str,
         runner.load(str(ckpt))
         runner.current_learning_iteration += 1  # the checkpoint's iteration is finished
         done_before = runner.current_learning_iteration
+    elif cfg.get("init_from"):
+        from pathrl.train.warm_start import warm_start
+
+        init_std = float(cfg["agent"]["actor"]["distribution_cfg"].get("init_std", 1.0))
+        warm_start(runner.alg, cfg["init_from"], env.num_obs, init_std)
     total = int(cfg["iterations"])
     anneal = cfg.get("std_anneal")
     if anneal:

@@ -1,0 +1,227 @@
+"""Sensory feedback of a physical task (ball on plate, ...) for the path-tracking env.
+
+A feedback source sees the control-rate joint setpoints of every decision step and returns what a sensor
+would report (observation), the per-env quantities its reward terms need, and whether the task failed
+(ball off the plate). Two kinds of sources implement the same :class:`Feedback` interface:
+
+* analytic torch models (:class:`AnalyticBall`): batched over all envs, fast enough for training;
+* PyBullet scenes in worker processes (:mod:`pathrl.sim.vec`): the reference, used for evaluation.
+
+The env never imports PyBullet: it only calls this interface.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Protocol
+
+import torch
+from torch import Tensor
+
+from pathrl.robot.kinematics import ForwardKinematics
+from pathrl.robot.model import RobotSpec
+
+GRAVITY = 9.81  # m/s^2
+
+# Plate and ball geometry (the authors' values, original_pathtracking.md 8.1); shared with pathrl.sim.ball_plate.
+PLATE_SIZE = (0.3393, 0.2715, 0.002)  # logical plate size (m)
+PLATE_BORDER = 0.03  # usable area ends this far inside the edge (m)
+PLACE_MARGIN = 0.06  # initial ball position keeps this far inside the usable area (m)
+USABLE_HALF = (PLATE_SIZE[0] / 2 - PLATE_BORDER, PLATE_SIZE[1] / 2 - PLATE_BORDER)  # (0.13965, 0.10575)
+BALL_RADIUS_MM = (20, 36)  # integer mm, inclusive
+ROLL_MU_1E4 = (1, 7)  # rolling friction x 1e4, integer, inclusive
+ROLL_FACTOR = 5.0 / 7.0  # in-plane ball acceleration / in-plane (g - a_plate): solid sphere rolling without slip
+# Rolling friction mu (m) resists like a force RES_FACTOR * mu * N / radius (fitted to PyBullet on tilted plates:
+# 1-10 deg, mu 1e-4..7e-4, radius 20-36 mm; tests/test_feedback.py)
+RES_FACTOR = 0.5
+
+
+@dataclass(frozen=True)
+class FeedbackStep:
+    """One decision step of a feedback source, per env.
+
+    obs: (N, k) sensor observation in about [-1, 1].
+    values: named (N,) quantities for reward terms and metrics (e.g. ``ball_dist``).
+    failed: (N,) the task failed during this step (e.g. the ball left the plate).
+    """
+
+    obs: Tensor
+    values: dict[str, Tensor] = field(default_factory=dict)
+    failed: Tensor | None = None
+
+
+class Feedback(Protocol):
+    """What the env needs from a feedback source (all tensors (N, ...), float64 setpoints)."""
+
+    name: str
+    num_obs: int
+    value_names: tuple[str, ...]  # keys of FeedbackStep.values
+
+    def reset(self, env_ids: Tensor, q: Tensor) -> None:
+        """Envs `env_ids` start a new episode with the robot at rest at `q` (len(env_ids), D)."""
+
+    def step(self, q: Tensor, qd: Tensor) -> FeedbackStep:
+        """Advance every env through one decision step of setpoints `q`, `qd` (N, C, D) at the control rate."""
+
+    def observe(self) -> Tensor:
+        """Current observation (N, num_obs)."""
+
+    def close(self) -> None:
+        """Release processes / clients (no-op for torch models)."""
+
+
+def ball_observation(prev_rel: Tensor, rel: Tensor) -> Tensor:
+    """The authors' ball state: previous then current (x, y) relative to the usable half-size; (N, 4)."""
+    return torch.cat([prev_rel, rel], dim=1)
+
+
+def sample_ball_radius(n: int, generator: torch.Generator, device: torch.device) -> Tensor:
+    """Ball radii (n,) in metres, integer millimetres uniform in BALL_RADIUS_MM (the authors' randomization)."""
+    lo, hi = BALL_RADIUS_MM
+    return torch.randint(lo, hi + 1, (n,), generator=generator, device=device).to(torch.float64) / 1000.0
+
+
+def sample_rolling_friction(n: int, generator: torch.Generator, device: torch.device) -> Tensor:
+    """Rolling friction coefficients (n,), k / 10000 with integer k uniform in ROLL_MU_1E4 (the authors' range)."""
+    lo, hi = ROLL_MU_1E4
+    return torch.randint(lo, hi + 1, (n,), generator=generator, device=device).to(torch.float64) / 10000.0
+
+
+def sample_ball_xy(n: int, generator: torch.Generator, device: torch.device) -> Tensor:
+    """Initial ball centres (n, 2) on the plate (m), uniform inside the placement area."""
+    half = torch.tensor([USABLE_HALF[0] - PLACE_MARGIN, USABLE_HALF[1] - PLACE_MARGIN], dtype=torch.float64,
+                        device=device)
+    return (torch.rand(n, 2, generator=generator, dtype=torch.float64, device=device) * 2.0 - 1.0) * half
+
+
+class AnalyticBall:
+    """Solid ball rolling without slipping on the plate at the TCP, batched in torch.
+
+    Per control period, with the plate pose (O, R) from forward kinematics of the setpoints, the plate
+    point under the ball p = O + R r (r = ball centre in plate coordinates) is differenced twice in time to
+    get its acceleration a_p (this includes alpha x r and omega x (omega x r)). No slip at the contact and
+    the ball's angular momentum give, for a plate turning at w_n about its normal, the acceleration
+    relative to the plate (plate coordinates, in-plane)
+
+        r'' = f (g - a_p) - (1 + f) w_n x r',    f = m rho^2 / (I + m rho^2)
+
+    (f = 5/7 for a solid sphere). The second term makes a ball on a turning plate circle instead of
+    drifting outward. Rolling friction (coefficient mu 1e-4..7e-4 m, drawn per episode as the authors did)
+    acts as a Coulomb-like resistance of f RES_FACTOR mu |g_n| / radius: a resting ball stays put under
+    small plate accelerations (for a 20 mm ball with mu 7e-4 up to 0.12 m/s^2), which is much of what
+    keeps a ball on a slowly moving plate. Neglected: the tilting components of the plate's angular
+    velocity, contact compliance and bouncing. The ball leaves the plate when its centre passes the plate
+    edge; it then stays off. The model steps at ``model_rate`` (default 40 Hz: every sixth 240 Hz setpoint;
+    forward kinematics dominates its cost). Validated against PyBullet in tests/test_feedback.py.
+    """
+
+    name = "ball_on_plate"
+    num_obs = 4
+    value_names = ("ball_dist", "ball_on_plate")
+
+    def __init__(self, robot: RobotSpec, num_envs: int, control_rate: float = 240.0, seed: int = 0,
+                 device: str | torch.device = "cpu", model_rate: float = 40.0):
+        if len(robot.tcps) != 1:
+            raise ValueError(f"ball on plate needs a robot with one TCP, {robot.name} has {len(robot.tcps)}")
+        self.device = torch.device(device)
+        self.fk = ForwardKinematics(robot, device=self.device)
+        self.n = num_envs
+        self.stride = max(1, int(round(control_rate / model_rate)))  # every stride-th setpoint drives the model
+        self.dtc = self.stride / control_rate
+        self.generator = torch.Generator(device=self.device)
+        self.generator.manual_seed(seed)
+        f64 = dict(dtype=torch.float64, device=self.device)
+        self.xy = torch.zeros(num_envs, 2, **f64)
+        self.vxy = torch.zeros(num_envs, 2, **f64)
+        self.radius = torch.full((num_envs,), 0.0275, **f64)
+        self.roll_mu = torch.full((num_envs,), 3e-4, **f64)  # rolling friction coefficient (m)
+        self.on = torch.ones(num_envs, dtype=torch.bool, device=self.device)
+        self.prev_rel = torch.zeros(num_envs, 2, **f64)
+        self.hist_o = torch.zeros(num_envs, 2, 3, **f64)  # plate origin at the last two control instants
+        self.hist_r = torch.eye(3, **f64).expand(num_envs, 2, 3, 3).clone()
+        self.half = torch.tensor(USABLE_HALF, **f64)
+        self.edge = torch.tensor(PLATE_SIZE[:2], **f64) / 2.0
+        self.g = torch.tensor([0.0, 0.0, -GRAVITY], **f64)
+
+    def plate_pose(self, q: Tensor) -> tuple[Tensor, Tensor]:
+        """Plate centre (surface mid-plane) positions (..., 3) and rotations (..., 3, 3) for setpoints (..., D)."""
+        shape = q.shape[:-1]
+        pos, rot = self.fk.tcp_transforms(q.reshape(-1, q.shape[-1]))
+        pos = pos[:, 0] + rot[:, 0, :, 2] * (PLATE_SIZE[2] / 2)  # the plate's centre sits half its thickness up
+        return pos.reshape(*shape, 3), rot[:, 0].reshape(*shape, 3, 3)
+
+    def reset(self, env_ids: Tensor, q: Tensor) -> None:
+        if len(env_ids) == 0:
+            return
+        k = len(env_ids)
+        self.xy[env_ids] = sample_ball_xy(k, self.generator, self.device)
+        self.vxy[env_ids] = 0.0
+        self.radius[env_ids] = sample_ball_radius(k, self.generator, self.device)
+        self.roll_mu[env_ids] = sample_rolling_friction(k, self.generator, self.device)
+        self.on[env_ids] = True
+        o, r = self.plate_pose(q)
+        self.hist_o[env_ids] = o.unsqueeze(1).expand(k, 2, 3)
+        self.hist_r[env_ids] = r.unsqueeze(1).expand(k, 2, 3, 3)
+        self.prev_rel[env_ids] = self.xy[env_ids] / self.half
+
+    def _point(self, o: Tensor, r: Tensor, local: Tensor) -> Tensor:
+        return o + (r @ local.unsqueeze(-1)).squeeze(-1)
+
+    def step(self, q: Tensor, qd: Tensor) -> FeedbackStep:
+        q = q[:, self.stride - 1 :: self.stride]
+        c = q.shape[1]
+        o, r = self.plate_pose(q)  # (N, C, 3), (N, C, 3, 3)
+        o = torch.cat([self.hist_o, o], dim=1)  # instants -2, -1, 0 .. C-1 -> index k + 2
+        r = torch.cat([self.hist_r, r], dim=1)
+        self.prev_rel = self.xy / self.half
+        was_on = self.on.clone()
+        for k in range(c):
+            # acceleration of the plate point under the ball at instant k-1 (central difference)
+            local = torch.cat([self.xy, self.radius.unsqueeze(1) + PLATE_SIZE[2] / 2], dim=1)
+            p0 = self._point(o[:, k], r[:, k], local)
+            p1 = self._point(o[:, k + 1], r[:, k + 1], local)
+            p2 = self._point(o[:, k + 2], r[:, k + 2], local)
+            a_p = (p2 - 2.0 * p1 + p0) / self.dtc**2
+            rel_g = ((self.g - a_p).unsqueeze(1) @ r[:, k + 1]).squeeze(1)  # R^T (g - a_p), plate frame
+            # plate angular velocity about its normal: skew(w) = dR/dt R^T, expressed in the plate frame
+            w = ((r[:, k + 2] - r[:, k]) / (2.0 * self.dtc)) @ r[:, k + 1].transpose(1, 2)
+            w_z = (r[:, k + 1, :, 2] * torch.stack([w[:, 2, 1] - w[:, 1, 2], w[:, 0, 2] - w[:, 2, 0],
+                                                    w[:, 1, 0] - w[:, 0, 1]], dim=1)).sum(1) / 2.0
+            f = ROLL_FACTOR
+            drive = f * rel_g[:, :2] + (1.0 + f) * w_z.unsqueeze(1) * torch.stack([self.vxy[:, 1], -self.vxy[:, 0]], 1)
+            a_res = f * RES_FACTOR * self.roll_mu * rel_g[:, 2].abs() / self.radius
+            self.vxy = rolling_resistance(self.vxy, drive, a_res, self.dtc) * self.on.unsqueeze(1)
+            self.xy = self.xy + self.vxy * self.dtc * self.on.unsqueeze(1)
+            self.on = self.on & (self.xy.abs() <= self.edge).all(dim=1) & (rel_g[:, 2] < 0.0)
+        self.hist_o = o[:, -2:].clone()
+        self.hist_r = r[:, -2:].clone()
+        return FeedbackStep(obs=self.observe(), values=self.values(), failed=was_on & ~self.on)
+
+    def values(self) -> dict[str, Tensor]:
+        rel = self.xy / self.half
+        return {"ball_dist": rel.norm(dim=1), "ball_on_plate": self.on.to(torch.float64)}
+
+    def observe(self) -> Tensor:
+        return ball_observation(self.prev_rel, self.xy / self.half).clamp(-1.0, 1.0)
+
+    def close(self) -> None:
+        pass
+
+
+FEEDBACK_KINDS = ("ball_on_plate",)
+
+
+def rolling_resistance(v: Tensor, drive: Tensor, a_res: Tensor, dt: float) -> Tensor:
+    """Velocity (N, 2) after one step of `drive` (N, 2) acceleration against a Coulomb-like rolling resistance
+    of magnitude `a_res` (N,): a resting ball stays put while |drive| <= a_res, a rolling one is decelerated
+    along its velocity and stops instead of reversing."""
+    a_res = a_res.unsqueeze(1)
+    speed = v.norm(dim=1, keepdim=True)
+    resting = speed < 1e-9
+    d_norm = drive.norm(dim=1, keepdim=True)
+    start = torch.where(d_norm > a_res, drive * (1.0 - a_res / d_norm.clamp(min=1e-12)), torch.zeros_like(drive))
+    rolled = v + (drive - a_res * v / speed.clamp(min=1e-12)) * dt
+    rolled = torch.where((rolled * v).sum(1, keepdim=True) < 0.0, torch.zeros_like(v), rolled)  # no reversal
+    return torch.where(resting, start * dt, rolled)
+
+

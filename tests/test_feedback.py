@@ -1,0 +1,190 @@
+"""Sensory feedback: the analytic ball model against closed forms and PyBullet, the PyBullet worker pool, the
+ball task inside the tracking env, warm starts."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from tensordict import TensorDict
+
+from pathrl.dataset.io import load_pathset
+from pathrl.envs.feedback import RES_FACTOR, ROLL_FACTOR, AnalyticBall, rolling_resistance
+from pathrl.envs.rewards import build_reward_terms
+from pathrl.envs.tracking import PathTrackingEnv, TrackingEnvCfg
+from pathrl.paths.knots import KnotStrategy
+from pathrl.robot.model import load_robot_by_name
+from pathrl.train.warm_start import WarmStartError, widen_inputs
+
+LEVEL = torch.tensor([0.0, 0.5, 0.0, -1.0, 0.0, -1.5, 0.0], dtype=torch.float64)  # plate level, face up
+BALL_REWARD = {"path_length": {"weight": 4.0}, "deviation_max": {"weight": 0.9}, "deviation_mean": {"weight": 0.9},
+               "ball_centre": {"weight": 1.0}}
+ROOT_DATASET = Path(__file__).resolve().parents[1] / "datasets" / "iiwa7" / "ball_balancing"
+
+
+@pytest.fixture(scope="module")
+def iiwa():
+    return load_robot_by_name("iiwa7")
+
+
+def place(ball: AnalyticBall, xy, radius=0.0275, mu=3e-4) -> None:
+    ball.xy[:] = torch.as_tensor(xy, dtype=torch.float64)
+    ball.vxy[:] = 0.0
+    ball.radius[:] = radius
+    ball.roll_mu[:] = mu
+    ball.prev_rel[:] = ball.xy / ball.half
+
+
+def test_rolling_resistance_by_hand():
+    dt = 0.1
+    res = torch.tensor([0.2, 0.2, 0.2])
+    v = torch.tensor([[0.0, 0.0], [0.0, 0.0], [0.01, 0.0]])
+    drive = torch.tensor([[0.1, 0.0], [0.0, 0.5], [0.0, 0.0]])
+    out = rolling_resistance(v, drive, res, dt)
+    assert out[0].tolist() == [0.0, 0.0]  # resting, drive below the resistance: stays put
+    assert out[1].tolist() == pytest.approx([0.0, (0.5 - 0.2) * dt])  # starts with drive - resistance
+    assert out[2].tolist() == [0.0, 0.0]  # 0.01 m/s - 0.02 m/s would reverse: it stops instead
+
+
+def test_analytic_ball_on_a_tilted_plate(iiwa):
+    """A resting ball on a plate tilted by 5 deg: constant acceleration f (g sin - RES mu g cos / r), by hand."""
+    tilt = math.radians(5.0)
+    q = LEVEL.clone()
+    q[5] += tilt
+    ball = AnalyticBall(iiwa, 1, model_rate=40.0)
+    ball.reset(torch.tensor([0]), q[None])
+    place(ball, [[0.0, 0.0]])
+    c = 24
+    for _ in range(4):  # 0.4 s
+        ball.step(q.expand(1, c, 7), torch.zeros(1, c, 7, dtype=torch.float64))
+    g = 9.81
+    a = ROLL_FACTOR * (g * math.sin(tilt) - RES_FACTOR * 3e-4 * g * math.cos(tilt) / 0.0275)
+    n, dt = 16, 1.0 / 40.0  # semi-implicit Euler: x_n = a dt^2 n (n + 1) / 2
+    x = float(ball.xy[0].norm())
+    assert x == pytest.approx(a * dt * dt * n * (n + 1) / 2, rel=1e-3)
+    assert bool(ball.on[0])
+
+
+def test_analytic_ball_follows_pybullet(iiwa):
+    """Same setpoints (a ball-balancing path in 3 s, smooth time scaling) for the model and PyBullet: the ball
+    positions agree within 5 mm until it leaves the plate, and both lose it in the same 0.1 s step."""
+    from pathrl.sim.ball_plate import BallOnPlateScene, BallParams
+
+    paths = load_pathset(ROOT_DATASET, "test", KnotStrategy("distance", 0.3), robot=iiwa)
+    rate, c, period = 240.0, 24, 3.0
+    t = np.arange(0.0, period + 1e-9, 1.0 / rate)
+    u = t / period
+    s = float(paths.length[3]) * (10 * u**3 - 15 * u**4 + 6 * u**5)
+    q = paths.position_at(torch.full((len(s),), 3), torch.as_tensor(s)).numpy()
+    qd = np.gradient(q, 1.0 / rate, axis=0)
+    model = AnalyticBall(iiwa, 1, rate)
+    model.reset(torch.tensor([0]), torch.as_tensor(q[:1]))
+    with BallOnPlateScene(iiwa, seed=0) as scene:
+        scene.reset(q[0], ball_xy=(0.03, -0.02), ball=BallParams(0.0275, 0.1, 3e-4, 3e-4))
+        scene.follow(np.repeat(q[:1], 48, 0), np.zeros((48, 7)))  # let the ball settle on the plate
+        place(model, scene.ball_on_plate()[None, :2])
+        errors, fell = [], (None, None)
+        for k in range((len(q) - 1) // c):
+            sl = slice(1 + k * c, 1 + (k + 1) * c)
+            scene.follow(q[sl], qd[sl])
+            model.step(torch.as_tensor(q[sl])[None], torch.as_tensor(qd[sl])[None])
+            pb_on, model_on = scene.ball_is_on_plate(), bool(model.on[0])
+            if not pb_on or not model_on:
+                fell = (pb_on, model_on)
+                break
+            errors.append(np.linalg.norm(scene.ball_on_plate()[:2] - model.xy[0].numpy()))
+    assert len(errors) >= 5 and max(errors) < 0.005, errors
+    assert fell == (False, False)  # the ball left the plate in both, in the same step
+
+
+def test_pybullet_pool_is_deterministic_across_workers(iiwa):
+    from pathrl.sim.vec import PyBulletBall
+
+    q = LEVEL.expand(3, 7).clone()
+    q[:, 0] += torch.tensor([0.0, 0.2, -0.2], dtype=torch.float64)
+    ramp = torch.linspace(0, 1, 24, dtype=torch.float64)[None, :, None]
+    qs = q[:, None] + 0.3 * ramp * torch.tensor([1.0, 0, 0, 0, 0, 0, 0], dtype=torch.float64)
+    out = []
+    for workers in (1, 2):
+        pool = PyBulletBall(iiwa, 3, seed=7, workers=workers)
+        try:
+            pool.reset(torch.arange(3), q)
+            first = pool.observe().clone()
+            step = pool.step(qs, torch.zeros_like(qs))
+            out.append((first, step.obs, step.values["ball_on_plate"]))
+        finally:
+            pool.close()
+    for a, b in zip(out[0], out[1], strict=True):
+        torch.testing.assert_close(a, b)
+    assert out[0][0].shape == (3, 4) and (out[0][2] == 1.0).all()
+    assert not torch.equal(out[0][0][0], out[0][0][1])  # every scene draws its own ball
+
+
+def ball_env(iiwa, num_envs=8, feedback=None, **kw) -> PathTrackingEnv:
+    paths = load_pathset(ROOT_DATASET, "test", KnotStrategy("distance", 0.3, n_state=5), robot=iiwa)
+    cfg = TrackingEnvCfg(num_envs=num_envs, seed=0, segments="full", episode_budget_s=6.0, scale_budget=False,
+                         n_state=5, end_obs=True, end_tolerance=0.05, **kw)
+    fb = feedback or AnalyticBall(iiwa, num_envs, cfg.control_rate, seed=0)
+    return PathTrackingEnv(cfg, iiwa, paths, build_reward_terms(BALL_REWARD), fb)
+
+
+def test_ball_task_env_contract(iiwa):
+    env = ball_env(iiwa)
+    plain = PathTrackingEnv(env.cfg, iiwa, env.paths, build_reward_terms(
+        {k: v for k, v in BALL_REWARD.items() if k != "ball_centre"}))
+    assert env.num_obs == plain.num_obs + 4
+    obs = env.get_observations()
+    assert isinstance(obs, TensorDict) and obs["policy"].shape == (8, env.num_obs)
+    for _ in range(5):
+        obs, rew, dones, extras = env.step(torch.randn(8, 7))
+        assert torch.isfinite(obs["policy"]).all() and (obs["policy"].abs() <= 1).all() and (rew >= 0).all()
+        assert set(env.last_step) >= {"task/ball_dist", "task/ball_on_plate", "task_failed"}
+
+
+def test_ball_leaving_the_plate_ends_the_episode(iiwa):
+    env = ball_env(iiwa, num_envs=2)
+    fb = env.feedback
+    fb.xy[0] = torch.tensor([0.165, 0.0], dtype=torch.float64)  # 4 mm from the edge, rolling out at 1 m/s
+    fb.vxy[0] = torch.tensor([1.0, 0.0], dtype=torch.float64)
+    _, rew, dones, extras = env.step(torch.zeros(2, 7))
+    assert dones.tolist() == [True, False]
+    assert extras["log"]["Episode_Termination/task_failed"] == 1.0
+    assert bool(fb.on[0])  # the finished env was reset with a new ball
+
+
+def test_ball_reward_needs_the_ball(iiwa):
+    paths = load_pathset(ROOT_DATASET, "test", KnotStrategy("distance", 0.3, n_state=5), robot=iiwa)
+    with pytest.raises(ValueError, match="ball_centre.*task=ball_on_plate"):
+        PathTrackingEnv(TrackingEnvCfg(num_envs=2, n_state=5), iiwa, paths, build_reward_terms(BALL_REWARD))
+
+
+def test_same_actions_same_setpoints_in_both_backends(iiwa):
+    """The backend only senses: for the same actions, kinematic setpoints are identical."""
+    from pathrl.sim.vec import PyBulletBall
+
+    pool = PyBulletBall(iiwa, 2, seed=0, workers=1)
+    try:
+        envs = [ball_env(iiwa, 2, fail_terminates=False), ball_env(iiwa, 2, feedback=pool, fail_terminates=False)]
+        gen = torch.Generator().manual_seed(0)
+        for _ in range(5):
+            a = torch.rand(2, 7, generator=gen) * 2 - 1
+            for e in envs:
+                e.step(a)
+            torch.testing.assert_close(envs[0].pos, envs[1].pos, rtol=0, atol=0)
+    finally:
+        pool.close()
+
+
+def test_widen_inputs_keeps_the_policy():
+    state = {"mlp.0.weight": torch.randn(4, 3), "obs_normalizer._mean": torch.randn(1, 3),
+             "obs_normalizer._var": torch.rand(1, 3), "obs_normalizer._std": torch.rand(1, 3)}
+    wide = widen_inputs(state, 5)
+    assert wide["mlp.0.weight"].shape == (4, 5) and (wide["mlp.0.weight"][:, 3:] == 0).all()
+    torch.testing.assert_close(wide["mlp.0.weight"][:, :3], state["mlp.0.weight"])
+    assert wide["obs_normalizer._mean"][0, 3:].tolist() == [0.0, 0.0]
+    assert wide["obs_normalizer._std"][0, 3:].tolist() == [1.0, 1.0]
+    with pytest.raises(WarmStartError, match="only 2"):
+        widen_inputs(state, 2)
