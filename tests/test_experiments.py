@@ -74,3 +74,10 @@ def test_multirun_failing_job_does_not_stop_the_others(tmp_path, tiny_dataset):
     assert "dataset directory not found" in recs[0]["error"] or "not found" in str(recs)
     assert (tmp_path / "run_1" / "summary.json").is_file()
     assert "FAILED" in r.stdout + r.stderr
+
+
+def test_warm_starts_match_the_experiments():
+    from pathrl.repro.tables import WARM_STARTS
+
+    for model, source in WARM_STARTS.items():
+        assert _compose([f"+experiment={model}"]).init_from == f"models/{source}"

@@ -32,6 +32,11 @@ def synthetic_results() -> dict:
         if e.model in ("iiwa7_random", "iiwa7_random_length_eq_deviation", "armar4_random"):
             m = {k: round(1.0 + 0.25 * i + 0.01 * j, 4) for j, k in enumerate(METRICS)}
             evs[e.id] = {**m, "episodes": 1200, "limit_violations": 0}
+        if e.task:  # Table VII: one row reached the path end, the other never did (no duration)
+            m = {k: 0.5 + 0.01 * j for j, k in enumerate(METRICS)}
+            reached = e.model.endswith("_reward")
+            evs[e.id] = {**m, "episodes": 200, "limit_violations": 0, "ball_fell_pct": 0.5 if reached else 100.0,
+                         "duration_end_of_path_s": 2.5 if reached else None}
     bases = {b.id: {"toppra_duration_s": 2.5 + 0.1 * i, "toppra_max_joint_dev_rad": 1e-4}
              for i, b in enumerate(baselines()) if b.robot != "armar6"}
     return {"evaluations": evs, "baselines": bases}

@@ -35,7 +35,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 from pathrl.repro.figures import pareto_table_ii, path_overlay  # noqa: E402
 from pathrl.repro.render import render_latex, render_markdown  # noqa: E402
-from pathrl.repro.tables import ROWS, Baseline, Evaluation, baselines, evaluations  # noqa: E402
+from pathrl.repro.tables import ROWS, WARM_STARTS, Baseline, Evaluation, baselines, evaluations  # noqa: E402
 
 BIN = Path(sys.executable).parent
 PAPER = yaml.safe_load((ROOT / "tools" / "paper_tables.yaml").read_text())
@@ -149,8 +149,9 @@ def train_and_ship(model: str, e: Evaluation, profile: Profile, lay: Layout, log
             f"dataset.num_train={profile.num_train}", f"dataset.num_test={profile.num_test}",
             f"dataset.path={data}"], logs / f"dataset_{e.robot}_{e.dataset}.log")
     run_dir = lay.runs / model / "seed0"
+    warm = [f"init_from={lay.models / WARM_STARTS[model]}"] if model in WARM_STARTS else []
     sh([str(BIN / "pathrl-train"), f"+experiment={model}", "resume=true", f"run_dir={run_dir}",
-        f"dataset.path={data}", *profile.train_overrides], logs / f"train_{model}.log")
+        f"dataset.path={data}", *profile.train_overrides, *warm], logs / f"train_{model}.log")
     ship(run_dir, lay.models / model)
 
 
@@ -165,6 +166,8 @@ def evaluate(e: Evaluation, profile: Profile, lay: Layout, reuse: bool, logs: Pa
            f"segments={e.segments}", "seed=0", f"out={raw}"]
     if profile.episodes is not None:
         cmd.append(f"episodes={profile.episodes}")
+    if e.task:
+        cmd += [f"task={e.task}", "backend=pybullet"]
     sh(cmd, logs / f"eval_{e.id}.log")
 
 

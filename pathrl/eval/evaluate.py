@@ -127,6 +127,9 @@ def evaluate(
                    record, cfg if has_task else None)
 
 
+#: Name of the failure share in the paper's tables, per feedback task.
+FAILURE_METRIC = {"ball_on_plate": "ball_fell_pct"}
+
 #: Parallel envs (= PyBullet clients, spread over the worker processes) when evaluating in PyBullet.
 PYBULLET_ENVS = 100
 
@@ -151,6 +154,7 @@ def _finish(records, rollout_s, env, robot, paths, ds_path, split, segments, see
         t = task_cfg(task_run_cfg)
         metrics["task"] = {"name": t["name"], "backend": type(env.feedback).__name__, "observed": t["observe"]}
         metrics["task_failed_pct"] = 100.0 * float(np.mean([p["task_failed"] for p in per_episode]))
+        metrics[FAILURE_METRIC[t["feedback"]]] = metrics["task_failed_pct"]
     metrics["eval_wall_time_s"] = time.perf_counter() - t0 + rollout_s
     metrics["rollout_wall_time_s"] = rollout_s
     metrics["run_dir"] = str(run_dir)
@@ -204,6 +208,9 @@ def _aggregate(per: list[dict[str, Any]], robot: RobotSpec, dataset: str, split:
     for k in METRIC_KEYS:
         out[k] = mean(k)
     out["terminated_early_pct"] = 100.0 * mean("terminated_early")
+    reached = [p["duration_end_of_path_s"] for p in per if p["duration_end_of_path_s"] is not None]
+    out["duration_end_of_path_s"] = float(np.mean(reached)) if reached else None  # over episodes that got there
+    out["reached_end_pct"] = 100.0 * len(reached) / len(per)
     out["limit_violations"] = int(sum(p["limit_violations"] for p in per))
     out["per_episode"] = per
     return out

@@ -1,4 +1,4 @@
-"""The paper's Tables I-VI as data: which shipped policy, test split and TOPP-RA run fill each row.
+"""The paper's Tables I-VII as data: which shipped policy, test split and TOPP-RA run fill each row.
 
 An *evaluation* is one policy on one test split (``Evaluation``); a *baseline* is TOPP-RA on the same
 split, knots and episode plan (``Baseline``). Several rows share them (iiwa7 random fills a row of
@@ -23,10 +23,12 @@ class Evaluation:
     knots: str = "curvature_9"
     segments: str = "paper"  # paper (random segments) | full (whole paths)
     generalization: bool = False  # evaluated on another dataset than the one it was trained on
+    task: str | None = None  # evaluated with this feedback task in PyBullet (e.g. ball_on_plate)
 
     @property
     def id(self) -> str:
-        return f"{self.model}_on_{self.dataset}" if self.generalization else self.model
+        base = f"{self.model}_on_{self.dataset}" if self.generalization else self.model
+        return f"{base}_in_pybullet" if self.task else base
 
     @property
     def baseline(self) -> Baseline:
@@ -61,8 +63,8 @@ class Row:
 
 
 def _e(model: str, robot: str, dataset: str, knots: str = "curvature_9", segments: str = "paper",
-       generalization: bool = False) -> Evaluation:
-    return Evaluation(model, robot, dataset, knots, segments, generalization)
+       generalization: bool = False, task: str | None = None) -> Evaluation:
+    return Evaluation(model, robot, dataset, knots, segments, generalization, task)
 
 
 IIWA_RANDOM = _e("iiwa7_random", "iiwa7", "random")
@@ -74,6 +76,7 @@ TABLE_III = "table_III_knots_in_state"
 TABLE_IV = "table_IV_generalization_random_to_target_point"
 TABLE_V = "table_V_features_vs_toppra"
 TABLE_VI = "table_VI_toppra_timing"
+TABLE_VII = "table_VII_ball_on_plate"
 
 ROWS: tuple[Row, ...] = (
     Row(TABLE_I, "iiwa7/random", IIWA_RANDOM),
@@ -90,7 +93,16 @@ ROWS: tuple[Row, ...] = (
     Row(TABLE_III, "knots_9", IIWA_RANDOM),
     Row(TABLE_IV, "iiwa7", _e("iiwa7_random", "iiwa7", "target_point", generalization=True)),
     Row(TABLE_IV, "armar4_fixed", _e("armar4_random", "armar4", "target_point", generalization=True)),
+    # the tracking policy with the ball riding along unobserved; the policy trained with ball feedback
+    Row(TABLE_VII, "no_balancing_reward", _e("iiwa7_ball_balancing", "iiwa7", "ball_balancing", "distance_5", "full",
+                                             task="ball_on_plate")),
+    Row(TABLE_VII, "balancing_reward", _e("iiwa7_ball_balancing_reward", "iiwa7", "ball_balancing", "distance_5",
+                                          "full", task="ball_on_plate")),
 )
+
+
+#: Rows trained from another row's policy (conf/experiment/<model>.yaml: init_from: models/<source>).
+WARM_STARTS = {"iiwa7_ball_balancing_reward": "iiwa7_ball_balancing"}
 
 
 def evaluations(rows: tuple[Row, ...] = ROWS) -> list[Evaluation]:
