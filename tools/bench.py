@@ -139,6 +139,35 @@ def bench_decision(robot_name: str, repeats: int = 300) -> dict:
             "max_pct_of_step": 100 * t.max() / 0.1}
 
 
+def bench_ball_task(backend: str, num_envs: int, seconds: float, workers: int = 2) -> dict:
+    """Env steps/s of the ball-on-plate task (tracking + ball feedback) with the analytic torch ball or PyBullet
+    (one client per env, `workers` processes): the same MDP, so the ratio is the price of simulating physics."""
+    from pathrl.envs.feedback import AnalyticBall
+    from pathrl.sim.vec import PyBulletBall
+
+    robot = load_robot_by_name("iiwa7")
+    knots = synthetic_knots(robot, 64)
+    paths = build_pathset(knots, [f"p{i}" for i in range(len(knots))])
+    cfg = TrackingEnvCfg(num_envs=num_envs, seed=0, n_state=9, fail_terminates=False)
+    fb = (AnalyticBall(robot, num_envs, cfg.control_rate) if backend == "analytic"
+          else PyBulletBall(robot, num_envs, cfg.control_rate, workers=workers))
+    try:
+        env = PathTrackingEnv(cfg, robot, paths, build_reward_terms({**REWARD, "ball_centre": {"weight": 1.0}}), fb)
+        gen = torch.Generator().manual_seed(0)
+        actions = [torch.rand(num_envs, robot.dof, generator=gen) * 2 - 1 for _ in range(8)]
+        for k in range(3):
+            env.step(actions[k % 8])
+        steps, t0 = 0, time.perf_counter()
+        while time.perf_counter() - t0 < seconds:
+            env.step(actions[steps % 8])
+            steps += 1
+        dt = time.perf_counter() - t0
+    finally:
+        fb.close()
+    return {"backend": backend, "num_envs": num_envs, "workers": workers if backend == "pybullet" else None,
+            "steps": steps, "env_steps_per_s": steps * num_envs / dt}
+
+
 def bench_physics(scene_name: str, seconds: float) -> dict:
     """PyBullet physics steps per second (240 Hz steps incl. motor commands) of one sensory-feedback scene."""
     import numpy as np
@@ -187,6 +216,11 @@ def main() -> None:
     res["decision_armar6"] = bench_decision("armar6")
     res["physics_ball_on_plate"] = bench_physics("ball_on_plate", sec)
     res["physics_armar4_standing"] = bench_physics("armar4_standing", sec)
+    res["ball_task_analytic"] = bench_ball_task("analytic", n, sec)
+    res["ball_task_pybullet"] = bench_ball_task("pybullet", 16 if args.quick else 64, sec)
+    pyb = res["ball_task_pybullet"]["env_steps_per_s"]
+    res["ball_task_analytic_over_pybullet"] = res["ball_task_analytic"]["env_steps_per_s"] / pyb
+    res["kinematic_tracking_over_pybullet_ball"] = res["env_iiwa7"]["env_steps_per_s"] / pyb
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = out.with_suffix(".json.tmp")
@@ -209,6 +243,11 @@ def _print(res: dict, out: Path) -> None:
     t.add_row("batched / reference (iiwa7)", f"{res['batched_over_reference_iiwa7']:,.0f} x")
     p = res["ppo_iteration_iiwa7"]
     t.add_row(f"PPO iteration ({p['num_envs']} envs x {p['steps_per_env']} steps)", f"{p['s_per_iteration']:.2f} s")
+    for k in ("ball_task_analytic", "ball_task_pybullet"):
+        b = res[k]
+        t.add_row(f"ball task, {b['backend']}, {b['num_envs']} envs", f"{b['env_steps_per_s']:,.0f} steps/s")
+    t.add_row("ball task analytic / PyBullet", f"{res['ball_task_analytic_over_pybullet']:,.0f} x")
+    t.add_row("kinematic tracking env / PyBullet ball env", f"{res['kinematic_tracking_over_pybullet_ball']:,.0f} x")
     for k in ("decision_iiwa7", "decision_armar6", "decision_armar4_legs"):
         d = res[k]
         t.add_row(f"policy + limits per decision, {d['robot']}",
