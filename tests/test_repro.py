@@ -39,7 +39,9 @@ def synthetic_results() -> dict:
                          "duration_end_of_path_s": 2.5 if reached else None}
     bases = {b.id: {"toppra_duration_s": 2.5 + 0.1 * i, "toppra_max_joint_dev_rad": 1e-4}
              for i, b in enumerate(baselines()) if b.robot != "armar6"}
-    return {"evaluations": evs, "baselines": bases}
+    one = {"max_compute_to_duration_pct": 6.25, "decision_ms_mean": 5.0, "decision_ms_max": 12.5, "episodes": 50}
+    realtime = {"iiwa7": {"policy_and_limits": one, "with_simulation": {**one, "max_compute_to_duration_pct": 8.5}}}
+    return {"evaluations": evs, "baselines": bases, "realtime": realtime}
 
 
 def check_golden(name: str, text: str) -> None:

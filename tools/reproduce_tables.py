@@ -35,7 +35,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 from pathrl.repro.figures import pareto_table_ii, path_overlay  # noqa: E402
 from pathrl.repro.render import render_latex, render_markdown  # noqa: E402
-from pathrl.repro.tables import ROWS, WARM_STARTS, Baseline, Evaluation, baselines, evaluations  # noqa: E402
+from pathrl.repro.tables import REALTIME, ROWS, WARM_STARTS, Baseline, Evaluation, baselines, evaluations  # noqa: E402
 
 BIN = Path(sys.executable).parent
 PAPER = yaml.safe_load((ROOT / "tools" / "paper_tables.yaml").read_text())
@@ -137,7 +137,20 @@ def build_plan(args: argparse.Namespace, profile: Profile, lay: Layout) -> Plan:
         plan.add(f"evaluate {e.id}", lambda e=e: evaluate(e, profile, lay, args.reuse, logs))
     for b in bases:
         plan.add(f"TOPP-RA {b.robot}/{b.dataset} ({b.segments})", lambda b=b: toppra(b, profile, lay, args.reuse, logs))
+    if only is None:
+        for key, robot, split in REALTIME:
+            plan.add(f"real time {key}", lambda key=key, robot=robot, split=split: realtime(
+                key, robot, split, profile, lay, args.reuse, logs))
     return plan
+
+
+def realtime(key: str, robot: str, split: str, profile: Profile, lay: Layout, reuse: bool, logs: Path) -> None:
+    out = lay.out / "raw" / f"realtime_{key}.json"
+    if reuse and out.is_file():
+        return
+    episodes = 5 if profile.name == "quick" else 50
+    sh([sys.executable, "-m", "pathrl.eval.realtime", robot, str(lay.test_data / split), str(out),
+        "--episodes", str(episodes)], logs / f"realtime_{key}.log")
 
 
 def train_and_ship(model: str, e: Evaluation, profile: Profile, lay: Layout, logs: Path) -> None:
@@ -193,6 +206,11 @@ def collect(lay: Layout) -> dict:
         p = lay.out / "raw" / f"{b.id}.json"
         if p.is_file():
             res["baselines"][b.id] = json.loads(p.read_text())
+    res["realtime"] = {}
+    for key, _, _ in REALTIME:
+        p = lay.out / "raw" / f"realtime_{key}.json"
+        if p.is_file():
+            res["realtime"][key] = json.loads(p.read_text())
     return res
 
 

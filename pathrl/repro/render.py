@@ -10,12 +10,14 @@ from __future__ import annotations
 from typing import Any
 
 from pathrl.repro.tables import (
+    REALTIME,
     ROWS,
     SHORT_COLUMNS,
     TABLE_I,
     TABLE_II,
     TABLE_III,
     TABLE_IV,
+    TABLE_IX,
     TABLE_V,
     TABLE_VI,
     TABLE_VII,
@@ -111,6 +113,32 @@ def _table_vi(results: dict[str, Any], paper: dict[str, Any]) -> tuple[list[str]
     return lines, csv_rows
 
 
+def _table_ix(results: dict[str, Any], paper: dict[str, Any]) -> tuple[list[str], list[list[str]]]:
+    rows = paper[TABLE_IX]["rows"]
+    lines = ["## Table IX: computation time per trajectory duration (highest over the episodes)", "",
+             "One env, one torch thread, CPU time per decision: the policy, the setpoints, the valid acceleration "
+             "range and state of the next decision; *with simulation* adds the 24 PyBullet steps per decision "
+             "(iiwa7: plate and ball; ARMAR-4: free-standing; ARMAR-6: fixed base). The paper's figure includes "
+             "its simulation (i7-8700K).", "",
+             "| row | policy + limits (%) | with simulation (%) | decision mean / max (ms) | episodes |",
+             "|---|---|---|---|---|"]
+    csv_rows: list[list[str]] = []
+    for key, _, _ in REALTIME:
+        r = results.get("realtime", {}).get(key)
+        pv = rows.get(key, [None])[0]
+        if r is None:
+            lines.append(f"| {key} | – | – / {_fmt(pv)} | – | – |")
+            ours = None
+        else:
+            a, b = r["policy_and_limits"], r["with_simulation"]
+            ours = b["max_compute_to_duration_pct"]
+            lines.append(f"| {key} | **{_fmt(a['max_compute_to_duration_pct'])}** | {_cell(ours, pv, 2)} | "
+                         f"{_fmt(b['decision_ms_mean'])} / {_fmt(b['decision_ms_max'])} | {b['episodes']} |")
+        csv_rows.append([TABLE_IX, key, "max_compute_to_duration_pct", "" if ours is None else f"{ours:.6g}",
+                         "" if pv is None else f"{pv:g}"])
+    return lines, csv_rows
+
+
 def _table_v(paper: dict[str, Any]) -> list[str]:
     lines = ["## Table V: features (TOPP-RA vs learned)", "", "| feature | TOPP-RA | ours |", "|---|---|---|"]
     for k, (a, b) in paper[TABLE_V]["rows"].items():
@@ -133,6 +161,9 @@ def render_markdown(results: dict[str, Any], paper: dict[str, Any], profile: str
         csv_rows += rows
     body, rows = _table_vi(results, paper)
     lines += body + [""] + _table_v(paper)
+    csv_rows += rows
+    body, rows = _table_ix(results, paper)
+    lines += [""] + body
     csv_rows += rows
     missing = sorted({r.evaluation.model for r in ROWS if _metrics(results, r) is None})
     if missing:

@@ -77,6 +77,11 @@ TABLE_IV = "table_IV_generalization_random_to_target_point"
 TABLE_V = "table_V_features_vs_toppra"
 TABLE_VI = "table_VI_toppra_timing"
 TABLE_VII = "table_VII_ball_on_plate"
+TABLE_IX = "table_IX_computation_time"
+
+#: Table IX rows: (row key, robot, test split whose segments are timed).
+REALTIME = (("iiwa7", "iiwa7", "iiwa7/random"), ("armar4_with_legs", "armar4_legs", "armar4/target_point"),
+            ("armar6", "armar6", "armar6/random"))
 
 ROWS: tuple[Row, ...] = (
     Row(TABLE_I, "iiwa7/random", IIWA_RANDOM),

@@ -55,3 +55,19 @@ class MotorScene:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+class FixedBaseScene(MotorScene):
+    """A robot with a fixed base following setpoints (no task objects): the simulation cost of tracking alone."""
+
+    def __init__(self, robot, control_rate: float = 240.0, motor_force: float = 500.0):
+        super().__init__(control_rate, motor_force)
+        self.body = p.loadURDF(str(robot.urdf), useFixedBase=True, physicsClientId=self.cid)
+        joints = {p.getJointInfo(self.body, j, physicsClientId=self.cid)[1].decode(): j
+                  for j in range(p.getNumJoints(self.body, physicsClientId=self.cid))}
+        self.joint_ids = [joints[n] for n in robot.joints]
+
+    def reset(self, q: np.ndarray) -> None:
+        for j, x in zip(self.joint_ids, np.asarray(q, dtype=float), strict=True):
+            p.resetJointState(self.body, j, float(x), 0.0, physicsClientId=self.cid)
+        self._hold(q, np.zeros(len(self.joint_ids)))
