@@ -29,7 +29,9 @@ def test_experiment_composes(name):
     cfg = _compose([f"+experiment={name}"])
     assert cfg.experiment == name
     assert cfg.run_dir == f"runs/{name}/seed0"
-    assert cfg.dataset.path == f"data/{cfg.robot.name}/{cfg.dataset.name}"
+    from pathrl.repro.tables import PATH_ROBOT
+
+    assert cfg.dataset.path == f"data/{PATH_ROBOT.get(cfg.robot.name, cfg.robot.name)}/{cfg.dataset.name}"
     assert name.startswith(cfg.robot.name) and cfg.iterations > 0
     assert cfg.reward.terms.path_length.weight > 0
 

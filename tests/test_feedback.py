@@ -188,3 +188,29 @@ def test_widen_inputs_keeps_the_policy():
     assert wide["obs_normalizer._std"][0, 3:].tolist() == [1.0, 1.0]
     with pytest.raises(WarmStartError, match="only 2"):
         widen_inputs(state, 2)
+
+
+def test_standing_pool_reads_an_upright_robot():
+    from pathrl.sim.vec import PyBulletStanding
+
+    robot = load_robot_by_name("armar4")
+    pool = PyBulletStanding(robot, 2, seed=0, workers=1)
+    try:
+        q = torch.zeros(2, robot.dof, dtype=torch.float64)
+        pool.reset(torch.arange(2), q)
+        step = pool.step(q[:, None].expand(2, 24, robot.dof), torch.zeros(2, 24, robot.dof, dtype=torch.float64))
+        assert step.obs.shape == (2, 8) and (step.obs.abs() <= 1).all()
+        assert (step.values["upright"] == 1).all() and not step.failed.any()
+        assert (step.values["base_tilt"] < math.radians(2)).all() and (step.values["base_offset"] < 0.02).all()
+    finally:
+        pool.close()
+
+
+def test_standing_task_refuses_other_robots(iiwa):
+    from pathrl.train.runner import make_feedback
+
+    cfg = {"task": {"feedback": "standing", "backend": "pybullet"}, "env": {"control_rate": 240.0}}
+    with pytest.raises(ValueError, match="ARMAR-4"):
+        make_feedback(cfg, iiwa, 2, 0)
+    with pytest.raises(ValueError, match="backend=pybullet"):
+        make_feedback({**cfg, "task": {"feedback": "standing", "backend": "analytic"}}, iiwa, 2, 0)

@@ -117,7 +117,7 @@ def build_plan(args: argparse.Namespace, profile: Profile, lay: Layout) -> Plan:
     logs = lay.out / "logs"
     plan = Plan()
     if args.train:
-        needed = {(e.robot, e.dataset) for e in evals}
+        needed = {(e.data_robot, e.dataset) for e in evals}
         if profile.name == "quick":
             for robot, name in sorted(needed):
                 dest = lay.train_data / robot / name
@@ -156,11 +156,11 @@ def realtime(key: str, robot: str, split: str, profile: Profile, lay: Layout, re
 def train_and_ship(model: str, e: Evaluation, profile: Profile, lay: Layout, logs: Path) -> None:
     from pathrl.train.ship import ship
 
-    data = lay.train_data / e.robot / e.dataset
+    data = lay.train_data / e.data_robot / e.dataset
     if not (data / "train.npz").is_file():
-        sh([str(BIN / "pathrl-dataset"), "generate", f"robot={e.robot}", f"dataset={e.dataset}",
+        sh([str(BIN / "pathrl-dataset"), "generate", f"robot={e.data_robot}", f"dataset={e.dataset}",
             f"dataset.num_train={profile.num_train}", f"dataset.num_test={profile.num_test}",
-            f"dataset.path={data}"], logs / f"dataset_{e.robot}_{e.dataset}.log")
+            f"dataset.path={data}"], logs / f"dataset_{e.data_robot}_{e.dataset}.log")
     run_dir = lay.runs / model / "seed0"
     warm = [f"init_from={lay.models / WARM_STARTS[model]}"] if model in WARM_STARTS else []
     sh([str(BIN / "pathrl-train"), f"+experiment={model}", "resume=true", f"run_dir={run_dir}",
@@ -175,10 +175,12 @@ def evaluate(e: Evaluation, profile: Profile, lay: Layout, reuse: bool, logs: Pa
         return  # not shipped: the row shows a dash
     if reuse and (raw / "metrics.json").is_file():
         return
-    cmd = [str(BIN / "pathrl-eval"), f"run_dir={model}", f"dataset.path={lay.test_data / e.robot / e.dataset}",
+    cmd = [str(BIN / "pathrl-eval"), f"run_dir={model}", f"dataset.path={lay.test_data / e.data_robot / e.dataset}",
            f"segments={e.segments}", "seed=0", f"out={raw}"]
     if profile.episodes is not None:
         cmd.append(f"episodes={profile.episodes}")
+    elif e.episodes is not None:
+        cmd.append(f"episodes={e.episodes}")
     if e.task:
         cmd += [f"task={e.task}", "backend=pybullet"]
     sh(cmd, logs / f"eval_{e.id}.log")

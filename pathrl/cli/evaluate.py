@@ -2,7 +2,7 @@
 
     pathrl-eval run_dir=models/iiwa7_random [dataset=NAME | dataset.path=DIR] [split=test]
                 [episodes=N] [segments=paper|full] [seed=0] [out=DIR]
-                [task=ball_on_plate] [backend=pybullet|analytic]
+                [task=ball_on_plate|standing] [backend=pybullet|analytic]
 
 ``task`` adds a feedback task to a run trained without one (its sensor values stay unobserved); runs with
 a task are simulated with ``backend`` (default PyBullet).
@@ -16,7 +16,7 @@ from pathrl.cli.common import UserError, run_cli
 
 USAGE = ("usage: pathrl-eval run_dir=RUN [dataset=NAME | dataset.path=DIR] [split=test] [episodes=N] "
          "[segments=paper|full] [seed=S] [out=DIR] [record=true|false] [task=ball_on_plate] "
-         "[backend=pybullet|analytic]")
+         "[backend=pybullet|analytic]").replace("task=ball_on_plate", "task=ball_on_plate|standing")
 KEYS = {"run_dir", "dataset", "dataset.path", "split", "episodes", "segments", "seed", "out", "record", "num_envs",
         "task", "backend"}
 
@@ -55,8 +55,8 @@ def _main(argv: list[str]) -> None:
     segments = args.get("segments", "paper")
     if segments not in ("paper", "full"):
         raise UserError(f"segments must be paper or full, got {segments!r}")
-    if args.get("task", "ball_on_plate") not in ("ball_on_plate", "tracking"):
-        raise UserError(f"task must be ball_on_plate or tracking, got {args['task']!r}")
+    if args.get("task", "ball_on_plate") not in ("ball_on_plate", "standing", "tracking"):
+        raise UserError(f"task must be ball_on_plate, standing or tracking, got {args['task']!r}")
     if args.get("backend", "pybullet") not in ("pybullet", "analytic"):
         raise UserError(f"backend must be pybullet or analytic, got {args['backend']!r}")
     episodes = _int(args, "episodes", None)

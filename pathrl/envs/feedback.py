@@ -56,6 +56,7 @@ class Feedback(Protocol):
     name: str
     num_obs: int
     value_names: tuple[str, ...]  # keys of FeedbackStep.values
+    ok_value: str  # the value that is 1 while the task has not failed (sticky)
 
     def reset(self, env_ids: Tensor, q: Tensor) -> None:
         """Envs `env_ids` start a new episode with the robot at rest at `q` (len(env_ids), D)."""
@@ -118,6 +119,7 @@ class AnalyticBall:
     name = "ball_on_plate"
     num_obs = 4
     value_names = ("ball_dist", "ball_on_plate")
+    ok_value = "ball_on_plate"
 
     def __init__(self, robot: RobotSpec, num_envs: int, control_rate: float = 240.0, seed: int = 0,
                  device: str | torch.device = "cpu", model_rate: float = 40.0):

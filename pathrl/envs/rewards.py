@@ -90,6 +90,21 @@ def ball_centre(q: StepQuantities, margin: float = 0.06) -> Tensor:
     return (1.0 - (d / (1.0 - margin)).clamp(max=1.0)) ** 2 * on
 
 
+def base_tilt(q: StepQuantities, threshold: float = 0.125) -> Tensor:
+    """Standing robot: (1 - min(1, tilt / threshold))^2, tilt = angle of the pelvis z axis to world z (rad)."""
+    return _closeness(q.task["base_tilt"], threshold)
+
+
+def base_position(q: StepQuantities, threshold: float = 0.2) -> Tensor:
+    """Standing robot: (1 - min(1, |pelvis offset| / threshold))^2 (m)."""
+    return _closeness(q.task["base_offset"], threshold)
+
+
+def base_orientation(q: StepQuantities, threshold: float = 0.5) -> Tensor:
+    """Standing robot: (1 - min(1, d / threshold))^2, d = arccos|w| 2/pi in [0, 1] from the initial orientation."""
+    return _closeness(q.task["base_orientation"], threshold)
+
+
 RewardFn = Callable[..., Tensor]
 
 REWARD_TERMS: dict[str, RewardFn] = {
@@ -98,10 +113,15 @@ REWARD_TERMS: dict[str, RewardFn] = {
     "deviation_mean": deviation_mean,
     "action_saturation": action_saturation,
     "ball_centre": ball_centre,
+    "base_tilt": base_tilt,
+    "base_position": base_position,
+    "base_orientation": base_orientation,
 }
 
 #: Feedback values (StepQuantities.task) a term reads; the env refuses terms its feedback cannot serve.
-TASK_VALUES: dict[str, tuple[str, ...]] = {"ball_centre": ("ball_dist", "ball_on_plate")}
+TASK_VALUES: dict[str, tuple[str, ...]] = {"ball_centre": ("ball_dist", "ball_on_plate"), "base_tilt": ("base_tilt",),
+                                           "base_position": ("base_offset",),
+                                           "base_orientation": ("base_orientation",)}
 
 
 @dataclass(frozen=True)

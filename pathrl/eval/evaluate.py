@@ -113,7 +113,10 @@ def evaluate(
         num_envs = min(num_envs, PYBULLET_ENVS)  # one PyBullet client per env
     env_cfg = replace(env_cfg_from(cfg, num_envs=min(num_envs, episodes), seed=seed, knot_gap_norm=gap),
                       autoreset=False, device="cpu", max_deviation=None, fail_terminates=False)
-    feedback = make_feedback(cfg, robot, env_cfg.num_envs, seed, backend) if has_task else None
+    try:
+        feedback = make_feedback(cfg, robot, env_cfg.num_envs, seed, backend) if has_task else None
+    except (ValueError, RuntimeError) as exc:  # task / robot mismatch, a scene that cannot be built
+        raise RunError(str(exc)) from None
     try:
         env = PathTrackingEnv(env_cfg, robot, paths, build_reward_terms(cfg["reward"]["terms"]), feedback)
         policy = load_policy(cfg, env, ckpt)
@@ -128,7 +131,7 @@ def evaluate(
 
 
 #: Name of the failure share in the paper's tables, per feedback task.
-FAILURE_METRIC = {"ball_on_plate": "ball_fell_pct"}
+FAILURE_METRIC = {"ball_on_plate": "ball_fell_pct", "standing": "fell_pct"}
 
 #: Parallel envs (= PyBullet clients, spread over the worker processes) when evaluating in PyBullet.
 PYBULLET_ENVS = 100
@@ -191,8 +194,8 @@ def _episode_metrics(r: EpisodeRecord, env: PathTrackingEnv, fk: ForwardKinemati
         "duration_end_of_path_s": r.finish_step * r.extra["dt"] if r.finish_step >= 0 else None,
         "termination": r.termination,
         "terminated_early": r.termination != "robot_stopped",
-        # the ball's on-plate flag is sticky: 0 at the end <=> it fell at some point
-        **({"task_failed": r.extra["task"].get("ball_on_plate", 1.0) < 0.5} if r.extra.get("task") else {}),
+        # the task's ok flag (ball on the plate, robot upright) is sticky: 0 at the end <=> it failed at some point
+        **({"task_failed": r.extra["task"][env.feedback.ok_value] < 0.5} if r.extra.get("task") else {}),
         **dev,
         "limit_violations": int(viol["total"]),
     }

@@ -24,6 +24,7 @@ class Evaluation:
     segments: str = "paper"  # paper (random segments) | full (whole paths)
     generalization: bool = False  # evaluated on another dataset than the one it was trained on
     task: str | None = None  # evaluated with this feedback task in PyBullet (e.g. ball_on_plate)
+    episodes: int | None = None  # default: 1200 paper segments, or every path once for segments=full
 
     @property
     def id(self) -> str:
@@ -31,8 +32,13 @@ class Evaluation:
         return f"{base}_in_pybullet" if self.task else base
 
     @property
+    def data_robot(self) -> str:
+        """Whose datasets the policy tracks (``datasets/<data_robot>/<dataset>``)."""
+        return PATH_ROBOT.get(self.robot, self.robot)
+
+    @property
     def baseline(self) -> Baseline:
-        return Baseline(self.robot, self.dataset, _knot_positions(self.knots), self.segments)
+        return Baseline(self.data_robot, self.dataset, _knot_positions(self.knots), self.segments)
 
 
 @dataclass(frozen=True)
@@ -49,6 +55,10 @@ class Baseline:
         return f"toppra_{self.robot}_{self.dataset}_{self.segments}"
 
 
+#: Robots whose paths (path joints and their limits) are another robot's: TOPP-RA runs once for both.
+PATH_ROBOT = {"armar4_legs": "armar4"}
+
+
 def _knot_positions(knots: str) -> str:
     """Knot configs that differ only in how many knots the state shows share positions (and so the plan)."""
     strategy, _ = knots.rsplit("_", 1)
@@ -63,8 +73,8 @@ class Row:
 
 
 def _e(model: str, robot: str, dataset: str, knots: str = "curvature_9", segments: str = "paper",
-       generalization: bool = False, task: str | None = None) -> Evaluation:
-    return Evaluation(model, robot, dataset, knots, segments, generalization, task)
+       generalization: bool = False, task: str | None = None, episodes: int | None = None) -> Evaluation:
+    return Evaluation(model, robot, dataset, knots, segments, generalization, task, episodes)
 
 
 IIWA_RANDOM = _e("iiwa7_random", "iiwa7", "random")
@@ -77,6 +87,7 @@ TABLE_IV = "table_IV_generalization_random_to_target_point"
 TABLE_V = "table_V_features_vs_toppra"
 TABLE_VI = "table_VI_toppra_timing"
 TABLE_VII = "table_VII_ball_on_plate"
+TABLE_VIII = "table_VIII_armar4_balance"
 TABLE_IX = "table_IX_computation_time"
 
 #: Table IX rows: (row key, robot, test split whose segments are timed).
@@ -103,11 +114,19 @@ ROWS: tuple[Row, ...] = (
                                              task="ball_on_plate")),
     Row(TABLE_VII, "balancing_reward", _e("iiwa7_ball_balancing_reward", "iiwa7", "ball_balancing", "distance_5",
                                           "full", task="ball_on_plate")),
+    # free-standing ARMAR-4 in PyBullet, 200 paper segments each (a PyBullet episode costs ~1 s of CPU)
+    Row(TABLE_VIII, "fixed_legs/no_balancing_reward", _e("armar4_target_point", "armar4", "target_point",
+                                                         task="standing", episodes=200)),
+    Row(TABLE_VIII, "fixed_legs/balancing_reward", _e("armar4_target_point_balancing", "armar4", "target_point",
+                                                      task="standing", episodes=200)),
+    Row(TABLE_VIII, "controlled_legs/balancing_reward", _e("armar4_legs_target_point_balancing", "armar4_legs",
+                                                           "target_point", task="standing", episodes=200)),
 )
 
 
 #: Rows trained from another row's policy (conf/experiment/<model>.yaml: init_from: models/<source>).
-WARM_STARTS = {"iiwa7_ball_balancing_reward": "iiwa7_ball_balancing"}
+WARM_STARTS = {"iiwa7_ball_balancing_reward": "iiwa7_ball_balancing",
+               "armar4_target_point_balancing": "armar4_target_point"}
 
 
 def evaluations(rows: tuple[Row, ...] = ROWS) -> list[Evaluation]:

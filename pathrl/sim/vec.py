@@ -1,13 +1,17 @@
-"""Batched PyBullet feedback: N ball-on-plate scenes spread over worker processes (one DIRECT client per
-scene), behind the env's :class:`pathrl.envs.feedback.Feedback` interface.
+"""Batched PyBullet feedback: N scenes spread over worker processes (one DIRECT client per scene), behind the
+env's :class:`pathrl.envs.feedback.Feedback` interface.
 
 Each worker owns a contiguous block of envs. A decision step sends every worker its block of control-rate
-setpoints (n_w, C, D) and receives the ball readings; the workers simulate in parallel. Scene ``i`` draws
-its balls from ``seed + i``, so results do not depend on the number of workers.
+setpoints (n_w, C, D) and receives the sensor readings; the workers simulate in parallel. Scene ``i`` is
+seeded with ``seed + i``, so results do not depend on the number of workers.
+
+* :class:`PyBulletBall`: iiwa with a plate and a ball (:mod:`pathrl.sim.ball_plate`).
+* :class:`PyBulletStanding`: free-standing ARMAR-4 (:mod:`pathrl.sim.humanoid`), no torch model exists for it.
 """
 
 from __future__ import annotations
 
+import math
 import multiprocessing as mp
 from multiprocessing.connection import Connection
 
@@ -18,14 +22,56 @@ from torch import Tensor
 from pathrl.envs.feedback import USABLE_HALF, FeedbackStep, ball_observation
 from pathrl.robot.model import RobotSpec
 
+#: Free-standing robot: observation scales (the authors' normalization) and the fall threshold.
+BASE_POS_SCALE = 0.2 / math.sqrt(3.0)  # m
+BASE_TILT_SCALE = 0.125  # rad
+FALL_TILT_RAD = math.radians(30.0)
 
-def _worker(conn: Connection, robot: RobotSpec, first: int, count: int, seed: int, control_rate: float) -> None:
+
+def _make_scene(kind: str, robot: RobotSpec, seed: int, control_rate: float):
+    if kind == "ball_on_plate":
+        from pathrl.sim.ball_plate import BallOnPlateScene
+
+        return BallOnPlateScene(robot, seed=seed, control_rate=control_rate)
+    from pathrl.sim.humanoid import StandingScene
+
+    return StandingScene(robot, control_rate=control_rate, fall_tilt_deg=math.degrees(FALL_TILT_RAD))
+
+
+def _read(kind: str, scenes) -> tuple[np.ndarray, np.ndarray]:
+    """Sensor readings (n, k) and ok flags (n,): ball (x, y) on the plate and on-plate; or pelvis offset (3),
+    pelvis orientation xyzw (4), tilt (rad) and upright."""
+    if kind == "ball_on_plate":
+        out = np.zeros((len(scenes), 2))
+        ok = np.zeros(len(scenes), dtype=bool)
+        for i, s in enumerate(scenes):
+            if s.ball is not None:
+                out[i] = s.ball_on_plate()[:2]
+                ok[i] = s.ball_is_on_plate()
+        return out, ok
+    out = np.zeros((len(scenes), 8))
+    for i, s in enumerate(scenes):
+        out[i, :3] = s.pelvis_offset()
+        out[i, 3:7] = s.pelvis_pose()[1]
+        out[i, 7] = math.radians(s.tilt_deg())
+    return out, out[:, 7] <= FALL_TILT_RAD
+
+
+def _worker(conn: Connection, kind: str, robot: RobotSpec, first: int, count: int, seed: int,
+            control_rate: float) -> None:
     import torch as _torch
 
     _torch.set_num_threads(1)
-    from pathrl.sim.ball_plate import BallOnPlateScene
-
-    scenes = [BallOnPlateScene(robot, seed=seed + first + i, control_rate=control_rate) for i in range(count)]
+    scenes = []
+    try:
+        scenes += [_make_scene(kind, robot, seed + first + i, control_rate) for i in range(count)]
+    except Exception as exc:  # noqa: BLE001 - reported to the parent as one line
+        conn.send(("error", f"{type(exc).__name__}: {exc}"))
+        for s in scenes:
+            s.close()
+        conn.close()
+        return
+    conn.send(("ready",))
     try:
         while True:
             cmd, *args = conn.recv()
@@ -33,12 +79,12 @@ def _worker(conn: Connection, robot: RobotSpec, first: int, count: int, seed: in
                 local, q = args
                 for i, qi in zip(local, q, strict=True):
                     scenes[i].reset(qi)
-                conn.send(_read(scenes))
+                conn.send(_read(kind, scenes))
             elif cmd == "step":
                 q, qd = args
                 for s, qs, vs in zip(scenes, q, qd, strict=True):
                     s.follow(qs, vs)
-                conn.send(_read(scenes))
+                conn.send(_read(kind, scenes))
             elif cmd == "close":
                 break
     finally:
@@ -47,27 +93,10 @@ def _worker(conn: Connection, robot: RobotSpec, first: int, count: int, seed: in
         conn.close()
 
 
-def _read(scenes) -> tuple[np.ndarray, np.ndarray]:
-    """Ball (x, y) in plate coordinates (n, 2) and on-plate flags (n,) of every scene with a ball."""
-    xy = np.zeros((len(scenes), 2))
-    on = np.zeros(len(scenes), dtype=bool)
-    for i, s in enumerate(scenes):
-        if s.ball is not None:
-            xy[i] = s.ball_on_plate()[:2]
-            on[i] = s.ball_is_on_plate()
-    return xy, on
+class ScenePool:
+    """`num_envs` scenes of one kind over `workers` processes; readings come back as tensors."""
 
-
-class PyBulletBall:
-    """Ball on plate simulated in PyBullet, N envs over `workers` processes (same interface as AnalyticBall)."""
-
-    name = "ball_on_plate"
-    num_obs = 4
-    value_names = ("ball_dist", "ball_on_plate")
-
-    def __init__(self, robot: RobotSpec, num_envs: int, control_rate: float = 240.0, seed: int = 0,
-                 workers: int = 2):
-        self.n = num_envs
+    def __init__(self, kind: str, robot: RobotSpec, num_envs: int, control_rate: float, seed: int, workers: int):
         workers = max(1, min(int(workers), num_envs))
         bounds = np.linspace(0, num_envs, workers + 1).round().astype(int)
         self.blocks = [(int(a), int(b)) for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
@@ -76,51 +105,36 @@ class PyBulletBall:
         self.procs = []
         for a, b in self.blocks:
             parent, child = ctx.Pipe()
-            proc = ctx.Process(target=_worker, args=(child, robot, a, b - a, seed, control_rate), daemon=True)
+            proc = ctx.Process(target=_worker, args=(child, kind, robot, a, b - a, seed, control_rate), daemon=True)
             proc.start()
             child.close()
             self.conns.append(parent)
             self.procs.append(proc)
-        self.half = torch.tensor(USABLE_HALF, dtype=torch.float64)
-        self.xy = torch.zeros(num_envs, 2, dtype=torch.float64)
-        self.on = torch.zeros(num_envs, dtype=torch.bool)
-        self.prev_rel = torch.zeros(num_envs, 2, dtype=torch.float64)
+        errors = [msg for c in self.conns if (msg := c.recv())[0] == "error"]
+        if errors:
+            self.close()
+            raise RuntimeError(f"PyBullet {kind} scene: {errors[0][1]}")
 
     def _gather(self) -> tuple[Tensor, Tensor]:
         parts = [c.recv() for c in self.conns]
-        xy = torch.as_tensor(np.concatenate([p[0] for p in parts]))
-        on = torch.as_tensor(np.concatenate([p[1] for p in parts]))
-        return xy, on
+        return (torch.as_tensor(np.concatenate([p[0] for p in parts])),
+                torch.as_tensor(np.concatenate([p[1] for p in parts])))
 
-    def reset(self, env_ids: Tensor, q: Tensor) -> None:
-        if len(env_ids) == 0:
-            return
+    def reset(self, env_ids: Tensor, q: Tensor) -> tuple[Tensor, Tensor]:
+        """Reset envs `env_ids` at rest at `q`; readings of all envs."""
         ids = env_ids.cpu().numpy()
         qn = q.detach().cpu().numpy()
         for (a, b), c in zip(self.blocks, self.conns, strict=True):
             sel = (ids >= a) & (ids < b)
             c.send(("reset", (ids[sel] - a).tolist(), qn[sel]))
-        xy, on = self._gather()
-        self.xy[env_ids] = xy[env_ids]
-        self.on[env_ids] = on[env_ids]
-        self.prev_rel[env_ids] = xy[env_ids] / self.half
+        return self._gather()
 
-    def step(self, q: Tensor, qd: Tensor) -> FeedbackStep:
+    def step(self, q: Tensor, qd: Tensor) -> tuple[Tensor, Tensor]:
+        """Follow setpoints (N, C, D) in every scene; readings of all envs."""
         qn, vn = q.detach().cpu().numpy(), qd.detach().cpu().numpy()
         for (a, b), c in zip(self.blocks, self.conns, strict=True):
             c.send(("step", qn[a:b], vn[a:b]))
-        xy, on = self._gather()
-        self.prev_rel = self.xy / self.half
-        was_on = self.on.clone()
-        self.xy = torch.where(self.on.unsqueeze(1), xy, self.xy)  # a fallen ball keeps its last reading
-        self.on = self.on & on
-        return FeedbackStep(obs=self.observe(), values=self.values(), failed=was_on & ~self.on)
-
-    def values(self) -> dict[str, Tensor]:
-        return {"ball_dist": (self.xy / self.half).norm(dim=1), "ball_on_plate": self.on.to(torch.float64)}
-
-    def observe(self) -> Tensor:
-        return ball_observation(self.prev_rel, self.xy / self.half).clamp(-1.0, 1.0)
+        return self._gather()
 
     def close(self) -> None:
         for c in self.conns:
@@ -137,3 +151,99 @@ class PyBulletBall:
     def __del__(self) -> None:
         if getattr(self, "procs", None):
             self.close()
+
+
+class _PooledFeedback:
+    kind = ""
+
+    def __init__(self, robot: RobotSpec, num_envs: int, control_rate: float = 240.0, seed: int = 0,
+                 workers: int = 2):
+        self.pool = ScenePool(self.kind, robot, num_envs, control_rate, seed, workers)
+        self.ok = torch.zeros(num_envs, dtype=torch.bool)
+
+    def close(self) -> None:
+        self.pool.close()
+
+
+class PyBulletBall(_PooledFeedback):
+    """Ball on plate simulated in PyBullet (same interface and observation as AnalyticBall)."""
+
+    kind = name = "ball_on_plate"
+    num_obs = 4
+    value_names = ("ball_dist", "ball_on_plate")
+    ok_value = "ball_on_plate"
+
+    def __init__(self, robot: RobotSpec, num_envs: int, control_rate: float = 240.0, seed: int = 0,
+                 workers: int = 2):
+        super().__init__(robot, num_envs, control_rate, seed, workers)
+        self.half = torch.tensor(USABLE_HALF, dtype=torch.float64)
+        self.xy = torch.zeros(num_envs, 2, dtype=torch.float64)
+        self.prev_rel = torch.zeros(num_envs, 2, dtype=torch.float64)
+
+    def reset(self, env_ids: Tensor, q: Tensor) -> None:
+        if len(env_ids) == 0:
+            return
+        xy, on = self.pool.reset(env_ids, q)
+        self.xy[env_ids] = xy[env_ids]
+        self.ok[env_ids] = on[env_ids]
+        self.prev_rel[env_ids] = xy[env_ids] / self.half
+
+    def step(self, q: Tensor, qd: Tensor) -> FeedbackStep:
+        xy, on = self.pool.step(q, qd)
+        self.prev_rel = self.xy / self.half
+        was_on = self.ok.clone()
+        self.xy = torch.where(self.ok.unsqueeze(1), xy, self.xy)  # a fallen ball keeps its last reading
+        self.ok = self.ok & on
+        return FeedbackStep(obs=self.observe(), values=self.values(), failed=was_on & ~self.ok)
+
+    def values(self) -> dict[str, Tensor]:
+        return {"ball_dist": (self.xy / self.half).norm(dim=1), "ball_on_plate": self.ok.to(torch.float64)}
+
+    def observe(self) -> Tensor:
+        return ball_observation(self.prev_rel, self.xy / self.half).clamp(-1.0, 1.0)
+
+
+class PyBulletStanding(_PooledFeedback):
+    """Free-standing ARMAR-4: pelvis offset, orientation and tilt relative to the initial upright pose.
+
+    Observation (8, the authors' layout and scales): pelvis offset / (0.2/sqrt 3 m), pelvis quaternion
+    (xyzw), tilt normalized from [0, 0.125 rad] to [-1, 1]. Values: ``base_tilt`` (rad), ``base_offset`` (m),
+    ``base_orientation`` (arccos|w| 2/pi, 0..1) and ``upright``; the robot has fallen (failure, sticky) once
+    the tilt exceeds 30 deg.
+    """
+
+    kind = name = "standing"
+    num_obs = 8
+    value_names = ("base_tilt", "base_offset", "base_orientation", "upright")
+    ok_value = "upright"
+
+    def __init__(self, robot: RobotSpec, num_envs: int, control_rate: float = 240.0, seed: int = 0,
+                 workers: int = 2):
+        super().__init__(robot, num_envs, control_rate, seed, workers)
+        self.reading = torch.zeros(num_envs, 8, dtype=torch.float64)
+        self.reading[:, 6] = 1.0
+
+    def reset(self, env_ids: Tensor, q: Tensor) -> None:
+        if len(env_ids) == 0:
+            return
+        r, ok = self.pool.reset(env_ids, q)
+        self.reading[env_ids] = r[env_ids]
+        self.ok[env_ids] = ok[env_ids]
+
+    def step(self, q: Tensor, qd: Tensor) -> FeedbackStep:
+        r, ok = self.pool.step(q, qd)
+        was_up = self.ok.clone()
+        self.reading = r
+        self.ok = self.ok & ok
+        return FeedbackStep(obs=self.observe(), values=self.values(), failed=was_up & ~self.ok)
+
+    def values(self) -> dict[str, Tensor]:
+        r = self.reading
+        orient = torch.arccos(r[:, 6].abs().clamp(max=1.0)) * 2.0 / math.pi
+        return {"base_tilt": r[:, 7], "base_offset": r[:, :3].norm(dim=1), "base_orientation": orient,
+                "upright": self.ok.to(torch.float64)}
+
+    def observe(self) -> Tensor:
+        r = self.reading
+        tilt = 2.0 * r[:, 7:8] / BASE_TILT_SCALE - 1.0
+        return torch.cat([r[:, :3] / BASE_POS_SCALE, r[:, 3:7], tilt], dim=1).clamp(-1.0, 1.0)

@@ -56,6 +56,7 @@ def env_cfg_from(cfg: dict[str, Any], num_envs: int | None = None, seed: int | N
 NO_TASK = {"name": "tracking", "feedback": None, "backend": "analytic", "workers": 2, "observe": True,
            "fail_terminates": True}
 FEEDBACK_BACKENDS = ("analytic", "pybullet")
+FEEDBACKS = ("ball_on_plate", "standing")
 
 
 def task_cfg(cfg: dict[str, Any]) -> dict[str, Any]:
@@ -67,10 +68,18 @@ def make_feedback(cfg: dict[str, Any], robot: RobotSpec, num_envs: int, seed: in
     t = task_cfg(cfg)
     if t["feedback"] is None:
         return None
-    if t["feedback"] != "ball_on_plate":
-        raise ValueError(f"task.feedback: unknown {t['feedback']!r}; known: ['ball_on_plate']")
+    if t["feedback"] not in FEEDBACKS:
+        raise ValueError(f"task.feedback: unknown {t['feedback']!r}; known: {list(FEEDBACKS)}")
     backend = backend or t["backend"]
     rate = float(cfg["env"]["control_rate"])
+    if t["feedback"] == "standing":
+        if backend != "pybullet":
+            raise ValueError("task standing: no analytic model of a standing robot exists; use task.backend=pybullet")
+        if not robot.name.startswith("armar4"):
+            raise ValueError(f"task standing is for ARMAR-4 (armar4, armar4_legs), not {robot.name}")
+        from pathrl.sim.vec import PyBulletStanding
+
+        return PyBulletStanding(robot, num_envs, rate, seed=seed, workers=int(t["workers"]))
     if backend == "analytic":
         from pathrl.envs.feedback import AnalyticBall
 
