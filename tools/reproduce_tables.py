@@ -148,7 +148,7 @@ def realtime(key: str, robot: str, split: str, profile: Profile, lay: Layout, re
     out = lay.out / "raw" / f"realtime_{key}.json"
     if reuse and out.is_file():
         return
-    episodes = 5 if profile.name == "quick" else 30
+    episodes = 5 if profile.name == "quick" else 20
     sh([sys.executable, "-m", "pathrl.eval.realtime", robot, str(lay.test_data / split), str(out),
         "--episodes", str(episodes)], logs / f"realtime_{key}.log")
 
