@@ -259,6 +259,9 @@ def write_episodes_mcap(path: Path, robot: RobotSpec, paths, records: list[Episo
                                           "velocity": r.vel[k], "acceleration": r.acc[k]}, tk)
             w.write("/eval/tcp", {"episode": r.episode, "t": k * r.extra["dt"], "position": tcp_p[k],
                                   "orientation_xyzw": tcp_q[k]}, tk)
+            if k > 0 and r.extra.get("task_series"):  # feedback after step k (ball on the plate, pelvis tilt)
+                w.write("/eval/task", {"episode": r.episode, "t": k * r.extra["dt"],
+                                       **{n: float(v[k - 1]) for n, v in r.extra["task_series"].items()}}, tk)
         t_ns += int(round((r.steps + 1) * r.extra["dt"] * 1e9))
         w.write("/eval/episode_metrics", m, t_ns)
         w.flush()

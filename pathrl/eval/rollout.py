@@ -69,12 +69,15 @@ def _rollout_batch(env: PathTrackingEnv, policy: Policy, plan: Segments, ids: Te
     term = ["time_out"] * k
     task_end: list[dict[str, float]] = [{} for _ in range(k)]  # feedback values when the episode ended
     states = [(env.pos.clone(), env.vel.clone(), env.acc.clone())]
+    series: list[dict[str, Tensor]] = []  # feedback values after every step (empty without a task)
     max_steps = int(math.ceil(float(env.budget[:k].max()))) + 1
     for t in range(max_steps):
         with torch.inference_mode():
             actions = policy(env.get_observations())
         _, _, dones, _ = env.step(actions)
         states.append((env.pos.clone(), env.vel.clone(), env.acc.clone()))
+        if env.feedback is not None:
+            series.append({k[5:]: v.clone() for k, v in env.last_step.items() if k.startswith("task/")})
         newly = dones & active & (done_step < 0)
         if bool(newly.any()):
             done_step[newly] = t + 1
@@ -108,6 +111,8 @@ def _rollout_batch(env: PathTrackingEnv, policy: Policy, plan: Segments, ids: Te
             setpoints=torch.cat([p[:1], sp.reshape(-1, p.shape[1])]).cpu(),
             setpoint_vel=torch.cat([v[:1], sv.reshape(-1, p.shape[1])]).cpu(),
             setpoint_acc=torch.cat([a[:1], sa.reshape(-1, p.shape[1])]).cpu(),
-            extra={"dt": env.cfg.dt, "control_dt": env.cfg.dt / c, "task": task_end[i]},
+            extra={"dt": env.cfg.dt, "control_dt": env.cfg.dt / c, "task": task_end[i],
+                   "task_series": {key: torch.stack([s[key][i] for s in series[:steps]]).cpu()
+                                   for key in (series[0] if series else {})}},
         ))
     return out
