@@ -190,7 +190,8 @@ class AnalyticBall:
             w_z = (r[:, k + 1, :, 2] * torch.stack([w[:, 2, 1] - w[:, 1, 2], w[:, 0, 2] - w[:, 2, 0],
                                                     w[:, 1, 0] - w[:, 0, 1]], dim=1)).sum(1) / 2.0
             f = ROLL_FACTOR
-            drive = f * rel_g[:, :2] + (1.0 + f) * w_z.unsqueeze(1) * torch.stack([self.vxy[:, 1], -self.vxy[:, 0]], 1)
+            spin = (1.0 + f) * w_z.unsqueeze(1) * torch.stack([self.vxy[:, 1], -self.vxy[:, 0]], dim=1)  # -(1+f) w x v
+            drive = f * rel_g[:, :2] + spin
             a_res = f * RES_FACTOR * self.roll_mu * rel_g[:, 2].abs() / self.radius
             self.vxy = rolling_resistance(self.vxy, drive, a_res, self.dtc) * self.on.unsqueeze(1)
             self.xy = self.xy + self.vxy * self.dtc * self.on.unsqueeze(1)
@@ -208,9 +209,6 @@ class AnalyticBall:
 
     def close(self) -> None:
         pass
-
-
-FEEDBACK_KINDS = ("ball_on_plate",)
 
 
 def rolling_resistance(v: Tensor, drive: Tensor, a_res: Tensor, dt: float) -> Tensor:
