@@ -50,19 +50,23 @@ def make_env(robot: RobotSpec, num_envs: int, seed: int = 0) -> PathTrackingEnv:
     return PathTrackingEnv(cfg, robot, paths, build_reward_terms(REWARD))
 
 
-def bench_env(robot_name: str, num_envs: int, seconds: float) -> dict:
-    robot = load_robot_by_name(robot_name)
-    env = make_env(robot, num_envs)
+def run_steps(env: PathTrackingEnv, seconds: float, warmup: int) -> tuple[int, float]:
+    """Step `env` with 8 cycled random action batches for `seconds` after `warmup` steps: (steps, env-steps/s)."""
     gen = torch.Generator().manual_seed(0)
-    actions = [torch.rand(num_envs, robot.dof, generator=gen) * 2 - 1 for _ in range(8)]
-    for k in range(5):
+    actions = [torch.rand(env.num_envs, env.num_actions, generator=gen) * 2 - 1 for _ in range(8)]
+    for k in range(warmup):
         env.step(actions[k % 8])
     steps, t0 = 0, time.perf_counter()
     while time.perf_counter() - t0 < seconds:
         env.step(actions[steps % 8])
         steps += 1
-    dt = time.perf_counter() - t0
-    return {"robot": robot_name, "num_envs": num_envs, "steps": steps, "env_steps_per_s": steps * num_envs / dt}
+    return steps, steps * env.num_envs / (time.perf_counter() - t0)
+
+
+def bench_env(robot_name: str, num_envs: int, seconds: float) -> dict:
+    env = make_env(load_robot_by_name(robot_name), num_envs)
+    steps, rate = run_steps(env, seconds, warmup=5)
+    return {"robot": robot_name, "num_envs": num_envs, "steps": steps, "env_steps_per_s": rate}
 
 
 def bench_reference(robot_name: str, seconds: float) -> dict:
@@ -153,19 +157,11 @@ def bench_ball_task(backend: str, num_envs: int, seconds: float, workers: int = 
           else PyBulletBall(robot, num_envs, cfg.control_rate, workers=workers))
     try:
         env = PathTrackingEnv(cfg, robot, paths, build_reward_terms({**REWARD, "ball_centre": {"weight": 1.0}}), fb)
-        gen = torch.Generator().manual_seed(0)
-        actions = [torch.rand(num_envs, robot.dof, generator=gen) * 2 - 1 for _ in range(8)]
-        for k in range(3):
-            env.step(actions[k % 8])
-        steps, t0 = 0, time.perf_counter()
-        while time.perf_counter() - t0 < seconds:
-            env.step(actions[steps % 8])
-            steps += 1
-        dt = time.perf_counter() - t0
+        steps, rate = run_steps(env, seconds, warmup=3)
     finally:
         fb.close()
     return {"backend": backend, "num_envs": num_envs, "workers": workers if backend == "pybullet" else None,
-            "steps": steps, "env_steps_per_s": steps * num_envs / dt}
+            "steps": steps, "env_steps_per_s": rate}
 
 
 def bench_physics(scene_name: str, seconds: float) -> dict:

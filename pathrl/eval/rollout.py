@@ -67,7 +67,6 @@ def _rollout_batch(env: PathTrackingEnv, policy: Policy, plan: Segments, ids: Te
     active[:k] = True
     done_step = torch.full((env.num_envs,), -1, dtype=torch.long, device=dev)
     term = ["time_out"] * k
-    task_end: list[dict[str, float]] = [{} for _ in range(k)]  # feedback values when the episode ended
     states = [(env.pos.clone(), env.vel.clone(), env.acc.clone())]
     series: list[dict[str, Tensor]] = []  # feedback values after every step (empty without a task)
     max_steps = int(math.ceil(float(env.budget[:k].max()))) + 1
@@ -86,8 +85,6 @@ def _rollout_batch(env: PathTrackingEnv, policy: Policy, plan: Segments, ids: Te
                 term[i] = ("robot_stopped" if bool(info["stopped"][i]) else
                            "deviation" if bool(info["dev_terminated"][i]) else
                            "task_failed" if bool(info["task_failed"][i]) else "time_out")
-                if i < k:
-                    task_end[i] = {key[5:]: float(v[i]) for key, v in info.items() if key.startswith("task/")}
         if bool((done_step[:k] >= 0).all()):
             break
     pos = torch.stack([s[0] for s in states], 1)  # (N, T+1, D)
@@ -97,6 +94,8 @@ def _rollout_batch(env: PathTrackingEnv, policy: Policy, plan: Segments, ids: Te
     for i in range(k):
         steps = int(done_step[i]) if int(done_step[i]) > 0 else pos.shape[1] - 1
         p, v, a = pos[i, : steps + 1], vel[i, : steps + 1], acc[i, : steps + 1]
+        task_series = {key: torch.stack([s[key][i] for s in series[:steps]]).cpu()
+                       for key in (series[0] if series else {})}
         sp, sv, sa = interpolate_step(p[:-1], v[:-1], a[:-1], a[1:], env.cfg.dt, c)  # (T, C, D)
         out.append(EpisodeRecord(
             episode=int(ids[i]),
@@ -111,8 +110,8 @@ def _rollout_batch(env: PathTrackingEnv, policy: Policy, plan: Segments, ids: Te
             setpoints=torch.cat([p[:1], sp.reshape(-1, p.shape[1])]).cpu(),
             setpoint_vel=torch.cat([v[:1], sv.reshape(-1, p.shape[1])]).cpu(),
             setpoint_acc=torch.cat([a[:1], sa.reshape(-1, p.shape[1])]).cpu(),
-            extra={"dt": env.cfg.dt, "control_dt": env.cfg.dt / c, "task": task_end[i],
-                   "task_series": {key: torch.stack([s[key][i] for s in series[:steps]]).cpu()
-                                   for key in (series[0] if series else {})}},
+            # feedback after every step, and its values when the episode ended
+            extra={"dt": env.cfg.dt, "control_dt": env.cfg.dt / c, "task_series": task_series,
+                   "task": {key: float(v[-1]) for key, v in task_series.items()}},
         ))
     return out

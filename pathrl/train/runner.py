@@ -26,7 +26,7 @@ CHECKPOINT_RE = re.compile(r"^model_(\d+)\.pt$")
 
 def env_cfg_from(cfg: dict[str, Any], num_envs: int | None = None, seed: int | None = None,
                  knot_gap_norm: float | None = None) -> TrackingEnvCfg:
-    e = cfg["env"]
+    e, task = cfg["env"], task_cfg(cfg)
     return TrackingEnvCfg(
         num_envs=int(num_envs or e["num_envs"]),
         device=str(cfg.get("device", "cpu")),
@@ -47,8 +47,8 @@ def env_cfg_from(cfg: dict[str, Any], num_envs: int | None = None, seed: int | N
         knot_obs=str(e.get("knot_obs", "relative")),
         end_obs=bool(e.get("end_obs", False)),  # runs saved before these options existed did not have them
         end_tolerance=None if e.get("end_tolerance") is None else float(e["end_tolerance"]),
-        feedback_obs=bool(task_cfg(cfg)["observe"]),
-        fail_terminates=bool(task_cfg(cfg)["fail_terminates"]),
+        feedback_obs=bool(task["observe"]),
+        fail_terminates=bool(task["fail_terminates"]),
     )
 
 
