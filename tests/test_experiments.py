@@ -68,7 +68,7 @@ def test_multirun_failing_job_does_not_stop_the_others(tmp_path, tiny_dataset):
     sweep = tmp_path / "sweep"
     r = subprocess.run(
         [str(BIN / "pathrl-train"), "-m", f"dataset.path={tmp_path / 'missing'},{tiny_dataset}",
-         "iterations=1", "env.num_envs=16", "agent.num_steps_per_env=4", "threads=1",
+         "iterations=1", "env.num_envs=16", "agent.num_steps_per_env=4", "threads=1", "compile_limits=false",
          f"run_dir={tmp_path}/run_${{hydra:job.num}}", f"hydra.sweep.dir={sweep}"],
         cwd=tmp_path, capture_output=True, text=True, timeout=600)
     recs = [json.loads(x) for x in (sweep / "jobs.jsonl").read_text().splitlines()]

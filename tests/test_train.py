@@ -16,7 +16,7 @@ BIN = Path(sys.executable).parent
 
 def train_cmd(dataset, run_dir, iterations, *extra):
     return [str(BIN / "pathrl-train"), f"dataset.path={dataset}", f"run_dir={run_dir}", f"iterations={iterations}",
-            "env.num_envs=32", "agent.num_steps_per_env=8", "agent.save_interval=1", *extra]
+            "env.num_envs=32", "agent.num_steps_per_env=8", "agent.save_interval=1", "compile_limits=false", *extra]
 
 
 def run(cmd, **kw):
@@ -50,7 +50,8 @@ def test_train_resume_and_eval(tiny_dataset, tmp_path):
     assert r.returncode != 0 and "different config" in r.stderr
 
     out = tmp_path / "eval"
-    r = run([str(BIN / "pathrl-eval"), f"run_dir={run_dir}", "episodes=4", f"out={out}", "segments=full"])
+    r = run([str(BIN / "pathrl-eval"), f"run_dir={run_dir}", "compile_limits=false",
+             "episodes=4", f"out={out}", "segments=full"])
     assert r.returncode == 0, r.stderr[-2000:]
     m = json.loads((out / "metrics.json").read_text())
     assert m["episodes"] == 4 and len(m["per_episode"]) == 4
@@ -104,7 +105,8 @@ def test_ball_task_warm_start_train_and_pybullet_eval(tiny_dataset, tmp_path):
     assert r.returncode == 0, r.stderr[-2000:]
     assert "ball_centre" in json.dumps(scalars(ball)[0])
     out = tmp_path / "eval"
-    r = run([str(BIN / "pathrl-eval"), f"run_dir={ball}", "episodes=2", "segments=full", f"out={out}"])
+    r = run([str(BIN / "pathrl-eval"), f"run_dir={ball}", "compile_limits=false",
+             "episodes=2", "segments=full", f"out={out}"])
     assert r.returncode == 0, r.stderr[-2000:]
     m = json.loads((out / "metrics.json").read_text())
     task_msgs = [msg for t, _, msg in read_messages(out / "episodes.mcap") if t == "/eval/task"]
@@ -112,7 +114,8 @@ def test_ball_task_warm_start_train_and_pybullet_eval(tiny_dataset, tmp_path):
     assert m["task"] == {"name": "ball_on_plate", "backend": "PyBulletBall", "observed": True}
     assert 0.0 <= m["task_failed_pct"] <= 100.0 and len(m["per_episode"]) == 2
     # the tracking run evaluated with the ball riding along unobserved
-    r = run([str(BIN / "pathrl-eval"), f"run_dir={src}", "episodes=2", "segments=full", f"out={out}",
+    r = run([str(BIN / "pathrl-eval"), f"run_dir={src}", "compile_limits=false",
+             "episodes=2", "segments=full", f"out={out}",
              "record=false", "task=ball_on_plate", "backend=analytic"])
     assert r.returncode == 0, r.stderr[-2000:]
     assert json.loads((out / "metrics.json").read_text())["task"]["observed"] is False

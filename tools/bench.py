@@ -2,7 +2,10 @@
 time per decision of policy + limits for one env. Writes bench/results.json and prints a table.
 
 Paths are synthetic smooth paths inside the joint limits (no dataset needed), so the numbers measure
-the env itself. Threads: 1 (fastest for these sizes on the 2-core reference machine).
+the env itself. Threads: 1 (fastest for these sizes on the 2-core reference machine). Limit kernels are
+compiled (``pathrl.limits.kernels``, the training and evaluation default) unless ``--eager``; the env and
+decision benchmarks are repeated eagerly for comparison (``*_eager``). Compilation happens in untimed
+warm-up steps.
 """
 
 from __future__ import annotations
@@ -21,6 +24,7 @@ import torch  # noqa: E402
 
 from pathrl.envs.rewards import build_reward_terms  # noqa: E402
 from pathrl.envs.tracking import PathTrackingEnv, TrackingEnvCfg  # noqa: E402
+from pathrl.limits import kernels  # noqa: E402
 from pathrl.paths.pathset import build_pathset  # noqa: E402
 from pathrl.robot.model import RobotSpec, load_robot_by_name  # noqa: E402
 
@@ -65,8 +69,9 @@ def run_steps(env: PathTrackingEnv, seconds: float, warmup: int) -> tuple[int, f
 
 def bench_env(robot_name: str, num_envs: int, seconds: float) -> dict:
     env = make_env(load_robot_by_name(robot_name), num_envs)
-    steps, rate = run_steps(env, seconds, warmup=5)
-    return {"robot": robot_name, "num_envs": num_envs, "steps": steps, "env_steps_per_s": rate}
+    steps, rate = run_steps(env, seconds, warmup=30 if kernels.compiled() else 5)
+    return {"robot": robot_name, "num_envs": num_envs, "compiled": kernels.compiled(), "steps": steps,
+            "env_steps_per_s": rate}
 
 
 def bench_reference(robot_name: str, seconds: float) -> dict:
@@ -138,8 +143,8 @@ def bench_decision(robot_name: str, repeats: int = 300) -> dict:
             a1 = action_to_acceleration(act.clamp(-1, 1), lo, hi)
             interpolate_step(p, v, a, a1, 0.1, 24)
             times.append(time.perf_counter() - t0)
-    t = np.array(times[10:])
-    return {"robot": robot_name, "mean_ms": 1e3 * t.mean(), "max_ms": 1e3 * t.max(),
+    t = np.array(times[50:])  # the first calls compile
+    return {"robot": robot_name, "compiled": kernels.compiled(), "mean_ms": 1e3 * t.mean(), "max_ms": 1e3 * t.max(),
             "max_pct_of_step": 100 * t.max() / 0.1}
 
 
@@ -194,13 +199,21 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--seconds", type=float, default=5.0, help="time per env benchmark")
     ap.add_argument("--quick", action="store_true", help="tiny sizes (tests)")
+    ap.add_argument("--eager", action="store_true", help="limit kernels not compiled (implied by --quick)")
     ap.add_argument("--out", default=str(ROOT / "bench" / "results.json"))
     args = ap.parse_args()
     torch.set_num_threads(1)
+    compiled = not (args.eager or args.quick)
     sec = 0.5 if args.quick else args.seconds
     n = 256 if args.quick else 4096
     res = {"machine": {"cpus": os.cpu_count(), "platform": platform.platform(), "torch": torch.__version__,
                        "threads": torch.get_num_threads()}}
+    if compiled:
+        res["env_iiwa7_eager"] = bench_env("iiwa7", n, sec)
+        res["env_armar4_legs_eager"] = bench_env("armar4_legs", n, sec)
+        for name in ("iiwa7", "armar6", "armar4_legs"):
+            res[f"decision_{name}_eager"] = bench_decision(name)
+    kernels.set_compiled(compiled)
     res["env_iiwa7"] = bench_env("iiwa7", n, sec)
     res["env_armar4_legs"] = bench_env("armar4_legs", n, sec)
     res["reference_iiwa7"] = bench_reference("iiwa7", sec)
@@ -232,9 +245,12 @@ def _print(res: dict, out: Path) -> None:
     t = Table(title=f"pathrl benchmarks -> {out}")
     t.add_column("benchmark")
     t.add_column("result", justify="right")
-    t.add_row(f"env iiwa7, {res['env_iiwa7']['num_envs']} envs", f"{res['env_iiwa7']['env_steps_per_s']:,.0f} steps/s")
-    t.add_row(f"env armar4_legs (30 joints), {res['env_armar4_legs']['num_envs']} envs",
-              f"{res['env_armar4_legs']['env_steps_per_s']:,.0f} steps/s")
+    for key, label in (("env_iiwa7", "env iiwa7"), ("env_armar4_legs", "env armar4_legs (30 joints)")):
+        for suffix in ("", "_eager"):
+            if key + suffix in res:
+                e = res[key + suffix]
+                mode = "compiled" if e["compiled"] else "eager"
+                t.add_row(f"{label}, {e['num_envs']} envs, {mode}", f"{e['env_steps_per_s']:,.0f} steps/s")
     t.add_row("single-env reference iiwa7", f"{res['reference_iiwa7']['env_steps_per_s']:,.0f} steps/s")
     t.add_row("batched / reference (iiwa7)", f"{res['batched_over_reference_iiwa7']:,.0f} x")
     p = res["ppo_iteration_iiwa7"]
@@ -244,9 +260,11 @@ def _print(res: dict, out: Path) -> None:
         t.add_row(f"ball task, {b['backend']}, {b['num_envs']} envs", f"{b['env_steps_per_s']:,.0f} steps/s")
     t.add_row("ball task analytic / PyBullet", f"{res['ball_task_analytic_over_pybullet']:,.0f} x")
     t.add_row("kinematic tracking env / PyBullet ball env", f"{res['kinematic_tracking_over_pybullet_ball']:,.0f} x")
-    for k in ("decision_iiwa7", "decision_armar6", "decision_armar4_legs"):
+    for k in [f"decision_{r}{s}" for s in ("", "_eager") for r in ("iiwa7", "armar6", "armar4_legs")]:
+        if k not in res:
+            continue
         d = res[k]
-        t.add_row(f"policy + limits per decision, {d['robot']}",
+        t.add_row(f"policy + limits per decision, {d['robot']}, {'compiled' if d['compiled'] else 'eager'}",
                   f"{d['mean_ms']:.2f} ms (max {d['max_pct_of_step']:.1f} % of 0.1 s)")
     for k in ("physics_ball_on_plate", "physics_armar4_standing"):
         d = res[k]

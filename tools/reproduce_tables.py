@@ -51,12 +51,13 @@ class Profile:
     num_train: int  # paths of generated datasets (--train)
     num_test: int
     train_overrides: tuple[str, ...] = ()
+    compile_limits: bool = True  # torch.compile the limit kernels in trainings and evaluations
 
 
 PROFILES = {
     "full": Profile("full", None, 1000, 200),
     "quick": Profile("quick", 12, 12, 4, ("iterations=2", "env.num_envs=64", "agent.num_steps_per_env=8",
-                                          "agent.save_interval=1", "threads=1")),
+                                          "agent.save_interval=1", "threads=1"), compile_limits=False),
 }
 
 
@@ -164,7 +165,8 @@ def train_and_ship(model: str, e: Evaluation, profile: Profile, lay: Layout, log
     run_dir = lay.runs / model / "seed0"
     warm = [f"init_from={lay.models / WARM_STARTS[model]}"] if model in WARM_STARTS else []
     sh([str(BIN / "pathrl-train"), f"+experiment={model}", "resume=true", f"run_dir={run_dir}",
-        f"dataset.path={data}", *profile.train_overrides, *warm], logs / f"train_{model}.log")
+        f"dataset.path={data}", f"compile_limits={str(profile.compile_limits).lower()}", *profile.train_overrides,
+        *warm], logs / f"train_{model}.log")
     ship(run_dir, lay.models / model)
 
 
@@ -176,7 +178,7 @@ def evaluate(e: Evaluation, profile: Profile, lay: Layout, reuse: bool, logs: Pa
     if reuse and (raw / "metrics.json").is_file():
         return
     cmd = [str(BIN / "pathrl-eval"), f"run_dir={model}", f"dataset.path={lay.test_data / e.data_robot / e.dataset}",
-           f"segments={e.segments}", "seed=0", f"out={raw}"]
+           f"segments={e.segments}", "seed=0", f"out={raw}", f"compile_limits={str(profile.compile_limits).lower()}"]
     if profile.episodes is not None:
         cmd.append(f"episodes={profile.episodes}")
     elif e.episodes is not None:

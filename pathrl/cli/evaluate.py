@@ -2,7 +2,7 @@
 
     pathrl-eval run_dir=models/iiwa7_random [dataset=NAME | dataset.path=DIR] [split=test]
                 [episodes=N] [segments=paper|full] [seed=0] [out=DIR]
-                [task=ball_on_plate|standing] [backend=pybullet|analytic]
+                [task=ball_on_plate|standing] [backend=pybullet|analytic] [compile_limits=true|false]
 
 ``task`` adds a feedback task to a run trained without one (its sensor values stay unobserved); runs with
 a task are simulated with ``backend`` (default PyBullet).
@@ -15,10 +15,10 @@ from pathlib import Path
 from pathrl.cli.common import UserError, run_cli
 
 USAGE = ("usage: pathrl-eval run_dir=RUN [dataset=NAME | dataset.path=DIR] [split=test] [episodes=N] "
-         "[segments=paper|full] [seed=S] [out=DIR] [record=true|false] [task=ball_on_plate] "
-         "[backend=pybullet|analytic]").replace("task=ball_on_plate", "task=ball_on_plate|standing")
+         "[segments=paper|full] [seed=S] [out=DIR] [record=true|false] [task=ball_on_plate|standing] "
+         "[backend=pybullet|analytic] [compile_limits=true|false]")
 KEYS = {"run_dir", "dataset", "dataset.path", "split", "episodes", "segments", "seed", "out", "record", "num_envs",
-        "task", "backend"}
+        "task", "backend", "compile_limits"}
 
 
 def parse_args(argv: list[str]) -> dict[str, str]:
@@ -47,6 +47,13 @@ def _int(args: dict[str, str], key: str, default: int | None) -> int | None:
         raise UserError(f"{key} must be an integer, got {args[key]!r}") from None
 
 
+def _bool(args: dict[str, str], key: str, default: bool) -> bool:
+    value = args.get(key, str(default)).lower()
+    if value not in ("true", "false"):
+        raise UserError(f"{key} must be true or false, got {args[key]!r}")
+    return value == "true"
+
+
 def _main(argv: list[str]) -> None:
     from pathrl.dataset.io import DatasetError
     from pathrl.eval.evaluate import RunError, evaluate, load_run
@@ -59,6 +66,7 @@ def _main(argv: list[str]) -> None:
         raise UserError(f"task must be ball_on_plate, standing or tracking, got {args['task']!r}")
     if args.get("backend", "pybullet") not in ("pybullet", "analytic"):
         raise UserError(f"backend must be pybullet or analytic, got {args['backend']!r}")
+    flags = {k: _bool(args, k, True) for k in ("record", "compile_limits")}
     episodes = _int(args, "episodes", None)
     if episodes is not None and episodes < 1:
         raise UserError(f"episodes must be >= 1, got {episodes}")
@@ -74,8 +82,8 @@ def _main(argv: list[str]) -> None:
         m = evaluate(run_dir, dataset_path, args.get("split", "test"), episodes, segments,
                      _int(args, "seed", 0) or 0, Path(args["out"]) if "out" in args else None,
                      num_envs=_int(args, "num_envs", 1200) or 1200,
-                     record=args.get("record", "true").lower() != "false",
-                     task=args.get("task"), backend=args.get("backend", "pybullet"))
+                     record=flags["record"], task=args.get("task"), backend=args.get("backend", "pybullet"),
+                     compile_limits=flags["compile_limits"])
     except (RunError, DatasetError) as exc:
         raise UserError(str(exc)) from None
     _print_table(m)

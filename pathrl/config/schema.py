@@ -149,6 +149,7 @@ class TrainAppCfg:
     seed: int = 0
     device: str = "cpu"
     threads: int = 2
+    compile_limits: bool = True  # torch.compile the limit kernels (pathrl.limits.kernels)
     iterations: int = 400
     resume: bool = False
     run_dir: str = MISSING

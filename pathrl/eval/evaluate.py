@@ -18,6 +18,7 @@ from pathrl.envs.rewards import build_reward_terms
 from pathrl.envs.tracking import PathTrackingEnv
 from pathrl.eval.metrics import METRIC_KEYS, episode_deviation
 from pathrl.eval.rollout import EpisodeRecord, rollout
+from pathrl.limits import kernels
 from pathrl.limits.check import limit_violations
 from pathrl.limits.feasible import JointLimits
 from pathrl.logging.mcap_io import McapJsonWriter
@@ -79,6 +80,7 @@ def evaluate(
     progress: bool = True,
     task: str | None = None,
     backend: str = "pybullet",
+    compile_limits: bool = True,
 ) -> dict[str, Any]:
     """Evaluate the policy of `run_dir` deterministically; write metrics.json (+ episodes.mcap).
 
@@ -86,8 +88,10 @@ def evaluate(
     they were trained with). `task` adds a task to a run trained without one (e.g. ``ball_on_plate``: the
     ball rides along unobserved, as the paper's "no balancing reward" row). A task failure (ball off the
     plate) does not end an evaluation episode: the tracking metrics cover the whole path and the failure
-    is reported per episode (``task_failed``) and as ``task_failed_pct``.
+    is reported per episode (``task_failed``) and as ``task_failed_pct``. ``compile_limits``: see
+    :mod:`pathrl.limits.kernels` (same results to rounding).
     """
+    kernels.set_compiled(compile_limits)
     torch.set_num_threads(int(os.environ.get("PATHRL_THREADS", "1")))
     cfg, ckpt, summary = load_run(run_dir)
     trained_task = task_cfg(cfg)

@@ -15,6 +15,7 @@ import torch
 from torch import Tensor
 
 from pathrl.limits._velocity import velocity_floor
+from pathrl.limits.kernels import kernel
 
 
 @dataclass
@@ -45,6 +46,7 @@ class Peak:
     ramp: Tensor  # m: full-jerk knots after the step before the reduced-jerk knot onto -amax
 
 
+@kernel
 def last_down_crossing(v: Tensor, a: Tensor, k: Tensor) -> Tensor:
     """Time ``w`` where ``v + a*w - k*w**2/2`` crosses zero downwards (nan if the roots are complex).
 
@@ -57,6 +59,7 @@ def last_down_crossing(v: Tensor, a: Tensor, k: Tensor) -> Tensor:
     return torch.where(disc >= 0.0, w, float("nan"))
 
 
+@kernel
 def in_step_bound(s: Side, dt: float) -> Tensor:
     """Largest ``x`` keeping the position at or below ``pmax`` strictly inside the step.
 
@@ -79,6 +82,7 @@ def in_step_bound(s: Side, dt: float) -> Tensor:
     return torch.where((room == 0.0) & (s.v > 1e-9), -float("inf"), best)
 
 
+@kernel
 def greedy_peak(x: Tensor, s: Side, dt: float) -> Peak:
     """Highest position from the end of the step on, if the step ends with ``x`` and braking is greedy.
 
@@ -128,6 +132,7 @@ def greedy_peak(x: Tensor, s: Side, dt: float) -> Peak:
                 torch.where(low, 0, phase), m)
 
 
+@kernel
 def greedy_state(x: Tensor, s: Side, dt: float, t: Tensor) -> tuple[Tensor, Tensor, Tensor]:
     """Position, velocity and acceleration of the greedy braking trajectory at knot time ``t >= dt``."""
     amax, jmax = s.amax, s.jmax
@@ -147,6 +152,7 @@ def greedy_state(x: Tensor, s: Side, dt: float, t: Tensor) -> tuple[Tensor, Tens
             torch.where(hold, v_h - amax * w, v_r), torch.where(hold, -amax, a_r))
 
 
+@kernel
 def velocity_aware_peak(x: Tensor, s: Side, dt: float, peak: Peak, settle: float) -> Tensor:
     """Peak when the knot that ends the step containing the greedy peak obeys the velocity floor.
 
@@ -192,6 +198,7 @@ def descend(fn: PeakFn, x: Tensor, s: Side, dt: float, tol: float = 1e-13, max_i
     return out
 
 
+@kernel
 def hold_root(s: Side, dt: float, ramp: Tensor) -> tuple[Tensor, Tensor]:
     """Root ``x`` if the greedy peak lay in the hold phase with ``ramp`` full-jerk knots; and ``v_h``.
 
@@ -319,19 +326,26 @@ def _take_peak(peak: Peak, idx: Tensor) -> Peak:
     return Peak(*(getattr(peak, f.name)[idx] for f in fields(peak)))
 
 
+@kernel
 def _greedy_fn(x: Tensor, s: Side, dt: float) -> tuple[Tensor, Tensor]:
     peak = greedy_peak(x, s, dt)
     return peak.value, peak.slope
 
 
+@kernel
+def _aware_value(x: Tensor, s: Side, dt: float, settle: float) -> tuple[Tensor, Tensor]:
+    peak = greedy_peak(x, s, dt)
+    return velocity_aware_peak(x, s, dt, peak, settle), peak.slope
+
+
 def _aware_fn(settle: float) -> PeakFn:
     def fn(x: Tensor, s: Side, dt: float) -> tuple[Tensor, Tensor]:
-        peak = greedy_peak(x, s, dt)
-        return velocity_aware_peak(x, s, dt, peak, settle), peak.slope
+        return _aware_value(x, s, dt, settle)
 
     return fn
 
 
+@kernel
 def _ramp_reach(v: Tensor, a: Tensor, amax: Tensor, jmax: Tensor) -> Tensor:
     """Largest displacement ahead for a continuous full-jerk ramp from ``a`` onto ``-amax``, then held."""
     tr = (a + amax).clamp_min(0.0) / jmax
@@ -343,6 +357,7 @@ def _ramp_reach(v: Tensor, a: Tensor, amax: Tensor, jmax: Tensor) -> Tensor:
     return (reach + torch.where(in_ramp, 0.0, v_r.clamp_min(0.0) ** 2 / (2.0 * amax))).clamp_min(0.0)
 
 
+@kernel
 def reach_top(p0: Tensor, v0: Tensor, a0: Tensor, amax: Tensor, jmax: Tensor, dt: float,
               x_probe: Tensor) -> Tensor:
     """Upper bound on the greedy braking peak for every end acceleration ``x <= x_probe`` (cheap).

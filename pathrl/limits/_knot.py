@@ -13,6 +13,7 @@ import torch
 from torch import Tensor
 
 from pathrl.limits._braking import Peak, Side, hold_root
+from pathrl.limits.kernels import kernel
 
 
 def knot_stop_bound(s: Side, dt: float, peak: Peak) -> Tensor:
@@ -51,6 +52,7 @@ def knot_stop_bound(s: Side, dt: float, peak: Peak) -> Tensor:
     return out
 
 
+@kernel
 def _solve(s: Side, dt: float, stop: Tensor, turn: Tensor, ramp: Tensor) -> Tensor:
     """``x`` of one stop-at-a-knot profile (nan where inadmissible); all (M,), indices as floats.
 

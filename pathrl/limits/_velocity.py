@@ -9,7 +9,10 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
+from pathrl.limits.kernels import kernel
 
+
+@kernel
 def velocity_bound(v0: Tensor, a0: Tensor, vmax: Tensor, amax: Tensor, jmax: Tensor, dt: float,
                    settle: float) -> Tensor:
     """Largest end-of-step acceleration that still allows ``v <= vmax`` (no emergency handling).
@@ -50,12 +53,14 @@ def velocity_bound(v0: Tensor, a0: Tensor, vmax: Tensor, amax: Tensor, jmax: Ten
     return torch.where(c >= vmax, in_step, ramp)
 
 
+@kernel
 def velocity_emergency(v0: Tensor, a0: Tensor, vmax: Tensor, amax: Tensor, dt: float) -> Tensor:
     """True where even the hardest ramp to ``-amax`` within one step overshoots ``vmax`` (klimits)."""
     overshoot = 0.5 * a0 * a0 * dt / (a0 + amax)
     return (a0 > 0.0) & (v0 - 1e-8 > vmax - overshoot)
 
 
+@kernel
 def velocity_floor(v: Tensor, a: Tensor, vmax: Tensor, amax: Tensor, jmax: Tensor, dt: float,
                    settle: float) -> Tensor:
     """Lowest next knot that the velocity rule admits at knot state ``(v, a)`` (limit ``v >= -vmax``)."""

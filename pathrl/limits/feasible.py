@@ -38,6 +38,7 @@ from torch import Tensor
 from pathrl.limits._braking import Side, greedy_bound, in_step_bound, reach_top
 from pathrl.limits._knot import knot_stop_bound
 from pathrl.limits._velocity import velocity_bound, velocity_emergency, velocity_floor
+from pathrl.limits.kernels import kernel
 
 DEFAULT_DT = 0.1
 SETTLE_FACTOR = 0.01  # klimits acceleration_after_max_vel_limit_factor of the original work
@@ -212,6 +213,7 @@ def _position_subset(s: Side, dt: float, probe: Tensor, stop_at_knot: bool) -> t
     return safe_all, torch.where(outside, safe_all, torch.minimum(knot, safe_all))
 
 
+@kernel
 def _combine(jerk_hi: Tensor, vel_hi: Tensor, pos_hi: Tensor, knot_hi: Tensor
              ) -> tuple[Tensor, Tensor, Tensor]:
     """Intersect the (2, N, D) per-side upper bounds; returns (lo, hi, overlap) in joint coordinates.

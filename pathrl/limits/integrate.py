@@ -10,10 +10,13 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
+from pathrl.limits.kernels import kernel
+
 CONTROL_RATE_HZ = 240
 DEFAULT_SUBSTEPS = 24  # control setpoints per 0.1 s decision step at 240 Hz
 
 
+@kernel
 def interpolate_step(p0: Tensor, v0: Tensor, a0: Tensor, a1: Tensor, dt: float,
                      n_sub: int = DEFAULT_SUBSTEPS) -> tuple[Tensor, Tensor, Tensor]:
     """Setpoints at ``t = dt*k/n_sub``, k = 1..n_sub.
@@ -35,6 +38,7 @@ def interpolate_step(p0: Tensor, v0: Tensor, a0: Tensor, a1: Tensor, dt: float,
     return p, v, a
 
 
+@kernel
 def end_of_step(p0: Tensor, v0: Tensor, a0: Tensor, a1: Tensor, dt: float) -> tuple[Tensor, Tensor]:
     """Position and velocity at the end of the step; all (..., D)."""
     p1 = p0 + v0 * dt + (a0 / 3.0 + a1 / 6.0) * dt * dt

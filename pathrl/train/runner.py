@@ -18,6 +18,7 @@ from rsl_rl.runners import OnPolicyRunner
 from pathrl.dataset.io import load_pathset
 from pathrl.envs.rewards import build_reward_terms
 from pathrl.envs.tracking import PathTrackingEnv, TrackingEnvCfg
+from pathrl.limits import kernels
 from pathrl.paths.knots import KnotStrategy
 from pathrl.robot.model import RobotSpec, load_robot
 
@@ -187,6 +188,7 @@ def write_json_atomic(path: Path, obj: Any) -> None:
 def train(cfg: dict[str, Any], run_dir: Path, resume: bool = False) -> dict[str, Any]:
     """Train (or resume) a policy; writes config.yaml, checkpoints, run.mcap and summary.json into `run_dir`."""
     torch.set_num_threads(int(cfg.get("threads", 1)))
+    kernels.set_compiled(bool(cfg.get("compile_limits", False)))
     torch.manual_seed(int(cfg["seed"]))
     run_dir.mkdir(parents=True, exist_ok=True)
     ckpt = latest_checkpoint(run_dir)
@@ -196,7 +198,7 @@ def train(cfg: dict[str, Any], run_dir: Path, resume: bool = False) -> dict[str,
         saved = yaml.safe_load((run_dir / "config.yaml").read_text())
         saved.setdefault("task", NO_TASK)  # runs from before tasks / warm starts existed
         saved.setdefault("init_from", None)
-        diff = _config_diff(saved, cfg, ignore={"resume", "iterations"})
+        diff = _config_diff(saved, cfg, ignore={"resume", "iterations", "compile_limits"})
         if diff:
             raise ValueError(f"resume with a different config ({diff}); use the same overrides or a new run_dir")
     tmp = run_dir / "config.yaml.tmp"

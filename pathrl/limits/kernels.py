@@ -1,0 +1,67 @@
+"""Optional ``torch.compile`` of the elementwise limit kernels (a process-wide switch, off by default).
+
+The valid-range computation is a few hundred small elementwise torch ops, applied to subsets of a few
+to a few thousand elements. In eager mode the per-op dispatch dominates (measured: ``greedy_peak`` on
+40 elements 517 us eager vs 38 us compiled). Functions marked :func:`kernel` are pure elementwise
+maps; when compilation is on, each is compiled once (inductor, dynamic shapes, C++ compiler needed)
+and fused into one loop. Data-dependent control flow (which elements need work, iteration counts)
+stays in eager code around them. Results agree with eager mode to rounding (~1e-16 relative).
+
+The first compilation of all kernels takes minutes on a 2-core CPU; inductor caches the result on
+disk (``TORCHINDUCTOR_CACHE_DIR``, default ``/tmp/torchinductor_<user>``), later processes load it in
+seconds.
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Callable
+from typing import TypeVar
+
+import torch
+
+F = TypeVar("F", bound=Callable)
+
+_enabled = False
+_compiled: dict[Callable, Callable] = {}
+
+
+def set_compiled(enabled: bool) -> None:
+    """Switch compiled kernels on or off for this process."""
+    global _enabled
+    _enabled = bool(enabled)
+
+
+def compiled() -> bool:
+    """Whether compiled kernels are on."""
+    return _enabled
+
+
+def _batch_size(args: tuple) -> int:
+    """numel of the first tensor among ``args`` (or among the fields of a dataclass argument)."""
+    for arg in args:
+        if isinstance(arg, torch.Tensor):
+            return arg.numel()
+        fields = getattr(arg, "__dataclass_fields__", None)
+        if fields:
+            return _batch_size(tuple(getattr(arg, name) for name in fields))
+    return 0
+
+
+def kernel(fn: F) -> F:
+    """Mark a pure elementwise function; compiled on first use while :func:`set_compiled` is on.
+
+    Batches of 0 or 1 elements run eagerly: dynamic shapes specialize those sizes, and a recompile in
+    the middle of a run would cost more than it saves.
+    """
+
+    @functools.wraps(fn)
+    def call(*args):
+        if not _enabled or torch.compiler.is_compiling() or _batch_size(args) < 2:
+            return fn(*args)
+        compiled_fn = _compiled.get(fn)
+        if compiled_fn is None:
+            compiled_fn = _compiled[fn] = torch.compile(fn, dynamic=True)
+        return compiled_fn(*args)
+
+    return call  # type: ignore[return-value]

@@ -1,0 +1,65 @@
+"""Compiled limit kernels (``pathrl.limits.kernels``) give the eager results and stay safe.
+
+The first test compiles every kernel (minutes on a fresh 2-core machine; inductor's disk cache makes
+later runs fast). States come from eager rollouts with the property test's action patterns, so they
+cover the limits (position stops, velocity saturation, braking).
+"""
+
+from __future__ import annotations
+
+import pytest
+import torch
+from test_limits_property import _SHIPPED, DT, ROBOTS, _actions, _rollout
+
+from pathrl.limits import kernels
+from pathrl.limits.braking import braking_acceleration
+from pathrl.limits.feasible import action_to_acceleration, valid_acceleration_range
+from pathrl.limits.integrate import end_of_step
+
+
+@pytest.fixture
+def compiled_kernels():
+    kernels.set_compiled(True)
+    yield
+    kernels.set_compiled(False)
+
+
+def _both(fn, *args):
+    kernels.set_compiled(False)
+    eager = fn(*args)
+    kernels.set_compiled(True)
+    return eager, fn(*args)
+
+
+@pytest.mark.parametrize("robot", ROBOTS)
+def test_compiled_range_equals_eager(robot: str, compiled_kernels) -> None:
+    lim = _SHIPPED[ROBOTS.index(robot)]
+    g = torch.Generator().manual_seed(3)
+    n, d = 256, lim.dof
+    p = lim.pos[:, 0] + (lim.pos[:, 1] - lim.pos[:, 0]) * torch.rand(n, d, generator=g, dtype=torch.float64)
+    v, a, held = torch.zeros_like(p), torch.zeros_like(p), torch.zeros_like(p)
+    worst, compared = 0.0, 0
+    for k in range(120):
+        (lo, hi), (lo_c, hi_c) = _both(valid_acceleration_range, p, v, a, lim, DT)
+        worst = max(worst, float(((lo - lo_c).abs() / lim.acc).max()), float(((hi - hi_c).abs() / lim.acc).max()))
+        compared += lo.numel()
+        brake, brake_c = _both(braking_acceleration, p, v, a, lim, DT)
+        worst = max(worst, float(((brake - brake_c).abs() / lim.acc).max()))
+        a1 = action_to_acceleration(_actions(k, held, g), lo, hi)
+        (p, v), a = end_of_step(p, v, a, a1, DT), a1
+    assert compared == 120 * n * d
+    assert worst < 1e-9, worst  # relative to the acceleration limit
+
+
+@pytest.mark.parametrize("robot", ROBOTS)
+def test_compiled_rollouts_never_violate_limits(robot: str, compiled_kernels) -> None:
+    lim = _SHIPPED[ROBOTS.index(robot)]
+    assert _rollout(lim, n=64, seed=29) > 0  # asserts zero violations inside
+
+
+def test_switch_is_process_wide_and_off_by_default() -> None:
+    assert not kernels.compiled()
+    kernels.set_compiled(True)
+    assert kernels.compiled()
+    kernels.set_compiled(False)
+    assert not kernels.compiled()
