@@ -63,3 +63,12 @@ def test_switch_is_process_wide_and_off_by_default() -> None:
     assert kernels.compiled()
     kernels.set_compiled(False)
     assert not kernels.compiled()
+
+
+def test_use_compiled_restores_the_previous_setting() -> None:
+    with kernels.use_compiled(True):
+        assert kernels.compiled()
+        with kernels.use_compiled(False):
+            assert not kernels.compiled()
+        assert kernels.compiled()
+    assert not kernels.compiled()

@@ -91,7 +91,6 @@ def evaluate(
     is reported per episode (``task_failed``) and as ``task_failed_pct``. ``compile_limits``: see
     :mod:`pathrl.limits.kernels` (same results to rounding).
     """
-    kernels.set_compiled(compile_limits)
     torch.set_num_threads(int(os.environ.get("PATHRL_THREADS", "1")))
     cfg, ckpt, summary = load_run(run_dir)
     trained_task = task_cfg(cfg)
@@ -125,7 +124,8 @@ def evaluate(
         env = PathTrackingEnv(env_cfg, robot, paths, build_reward_terms(cfg["reward"]["terms"]), feedback)
         policy = load_policy(cfg, env, ckpt)
         t0 = time.perf_counter()
-        records = _run(env, policy, plan, episodes, progress)
+        with kernels.use_compiled(compile_limits):
+            records = _run(env, policy, plan, episodes, progress)
         rollout_s = time.perf_counter() - t0
     finally:
         if feedback is not None:

@@ -14,8 +14,9 @@ seconds.
 
 from __future__ import annotations
 
+import contextlib
 import functools
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from typing import TypeVar
 
 import torch
@@ -35,6 +36,17 @@ def set_compiled(enabled: bool) -> None:
 def compiled() -> bool:
     """Whether compiled kernels are on."""
     return _enabled
+
+
+@contextlib.contextmanager
+def use_compiled(enabled: bool) -> Iterator[None]:
+    """Compiled kernels on or off inside a ``with`` block; the previous setting is restored after it."""
+    before = _enabled
+    set_compiled(enabled)
+    try:
+        yield
+    finally:
+        set_compiled(before)
 
 
 def _batch_size(args: tuple) -> int:
