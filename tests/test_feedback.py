@@ -131,6 +131,16 @@ def ball_env(iiwa, num_envs=8, feedback=None, **kw) -> PathTrackingEnv:
     return PathTrackingEnv(cfg, iiwa, paths, build_reward_terms(BALL_REWARD), fb)
 
 
+def test_a_dead_pybullet_worker_is_one_clear_error(iiwa):
+    from pathrl.sim.vec import PyBulletBall
+
+    pool = PyBulletBall(iiwa, 2, seed=0, workers=1)
+    pool.pool.procs[0].kill()
+    with pytest.raises(RuntimeError, match="PyBullet worker process exited"):
+        pool.reset(torch.arange(2), LEVEL.expand(2, 7).clone())
+    pool.close()
+
+
 def test_ball_task_env_contract(iiwa):
     env = ball_env(iiwa)
     plain = PathTrackingEnv(env.cfg, iiwa, env.paths, build_reward_terms(

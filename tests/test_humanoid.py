@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -42,3 +44,28 @@ def test_push_makes_it_fall(scene):
         fell = fell or scene.fallen()
     assert fell
     assert scene.pelvis_offset()[0] > 0.2  # fell forward, in the push direction
+
+
+@pytest.mark.parametrize("robot", ["armar4_legs", "armar6"])
+def test_scenes_load_collision_geometry_only(robot, tmp_path):
+    """Visual meshes are dropped (memory), every collision mesh is kept and resolves to an existing file."""
+    import re
+    import xml.etree.ElementTree as ET
+
+    from pathrl.sim.scene import collision_only_urdf
+
+    urdf = load_robot_by_name(robot).urdf
+    text = collision_only_urdf(urdf)
+    original = ET.parse(urdf).getroot()
+    stripped = ET.fromstring(text)
+    assert not list(stripped.iter("visual"))
+    assert len(list(stripped.iter("collision"))) == len(list(original.iter("collision"))) > 0
+    files = re.findall(r'filename="([^"]+)"', text)
+    assert files and all(f.startswith("/") and Path(f).is_file() for f in files)
+    local = tmp_path / "r.urdf"  # relative and package:// paths, resolved against the file's location
+    (tmp_path / "pkg" / "m").mkdir(parents=True)
+    (tmp_path / "pkg" / "m" / "a.stl").write_text("solid a\nendsolid a\n")
+    local.write_text('<robot name="r"><link name="l"><visual><geometry><mesh filename="pkg/m/a.stl"/></geometry>'
+                     '</visual><collision><geometry><mesh filename="package://pkg/m/a.stl"/></geometry></collision>'
+                     '<collision><geometry><mesh filename="pkg/m/a.stl"/></geometry></collision></link></robot>')
+    assert re.findall(r'filename="([^"]+)"', collision_only_urdf(local)) == [str(tmp_path / "pkg/m/a.stl")] * 2

@@ -13,7 +13,7 @@ import numpy as np
 import pybullet as p
 
 from pathrl.robot.model import RobotSpec
-from pathrl.sim.scene import MotorScene, z_tilt_deg
+from pathrl.sim.scene import MotorScene, load_urdf, z_tilt_deg
 
 PELVIS_LINK = "root"
 FALL_TILT_DEG = 30.0
@@ -29,7 +29,7 @@ class StandingScene(MotorScene):
         self.fall_tilt_deg = fall_tilt_deg
         self.floor = p.createMultiBody(0, p.createCollisionShape(p.GEOM_PLANE, physicsClientId=self.cid),
                                        physicsClientId=self.cid)
-        self.body = p.loadURDF(str(robot.urdf), useFixedBase=False, physicsClientId=self.cid)
+        self.body = load_urdf(self.cid, robot.urdf, fixed_base=False)
         info = [p.getJointInfo(self.body, j, physicsClientId=self.cid)
                 for j in range(p.getNumJoints(self.body, physicsClientId=self.cid))]
         links = {i[12].decode(): j for j, i in enumerate(info)}

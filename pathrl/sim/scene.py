@@ -3,6 +3,10 @@ position motors (target position and velocity) that follow setpoints."""
 
 from __future__ import annotations
 
+import re
+import tempfile
+import xml.etree.ElementTree as ET
+from pathlib import Path
 from typing import Self
 
 import numpy as np
@@ -13,6 +17,38 @@ def z_tilt_deg(orientation_xyzw) -> float:
     """Angle between a frame's z axis and world z (deg)."""
     z = np.asarray(p.getMatrixFromQuaternion(orientation_xyzw)).reshape(3, 3)[:, 2]
     return float(np.degrees(np.arccos(np.clip(z[2], -1.0, 1.0))))
+
+
+def collision_only_urdf(urdf: Path) -> str:
+    """The URDF's text without ``<visual>`` elements and with absolute mesh paths (for a copy elsewhere).
+
+    A DIRECT client never draws, but PyBullet still parses every visual mesh: ARMAR-4's 89 MB of OBJ files
+    cost 285 MB per client. ``package://NAME/...`` resolves against the URDF's directory and its ancestors
+    (as PyBullet does), relative paths against the URDF's directory.
+    """
+    root = ET.parse(urdf).getroot()
+    for link in root.iter("link"):
+        for visual in link.findall("visual"):
+            link.remove(visual)
+
+    def resolve(match: re.Match) -> str:
+        name = match.group(1)
+        if name.startswith("package://"):
+            rest = name.removeprefix("package://")
+            found = [base / rest for base in (urdf.parent, *urdf.parents) if (base / rest).is_file()]
+            return f'filename="{found[0]}"' if found else match.group(0)  # PyBullet reports a missing mesh
+        return f'filename="{urdf.parent / name}"'
+
+    return re.sub(r'filename="([^"/][^"]*)"', resolve, ET.tostring(root, encoding="unicode"))
+
+
+def load_urdf(cid: int, urdf: Path, fixed_base: bool) -> int:
+    """Load ``urdf`` into client ``cid`` without its visual meshes (:func:`collision_only_urdf`)."""
+    urdf = Path(urdf).resolve()
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / urdf.name
+        path.write_text(collision_only_urdf(urdf))
+        return p.loadURDF(str(path), useFixedBase=fixed_base, physicsClientId=cid)
 
 
 class MotorScene:
@@ -62,7 +98,7 @@ class FixedBaseScene(MotorScene):
 
     def __init__(self, robot, control_rate: float = 240.0, motor_force: float = 500.0):
         super().__init__(control_rate, motor_force)
-        self.body = p.loadURDF(str(robot.urdf), useFixedBase=True, physicsClientId=self.cid)
+        self.body = load_urdf(self.cid, robot.urdf, fixed_base=True)
         joints = {p.getJointInfo(self.body, j, physicsClientId=self.cid)[1].decode(): j
                   for j in range(p.getNumJoints(self.body, physicsClientId=self.cid))}
         self.joint_ids = [joints[n] for n in robot.joints]

@@ -14,6 +14,7 @@ from __future__ import annotations
 import math
 import multiprocessing as mp
 from multiprocessing.connection import Connection
+from typing import NoReturn
 
 import numpy as np
 import torch
@@ -110,13 +111,33 @@ class ScenePool:
             child.close()
             self.conns.append(parent)
             self.procs.append(proc)
-        errors = [msg for c in self.conns if (msg := c.recv())[0] == "error"]
+        errors = [msg for c in self.conns if (msg := self._recv(c))[0] == "error"]
         if errors:
             self.close()
             raise RuntimeError(f"PyBullet {kind} scene: {errors[0][1]}")
 
+    def _recv(self, conn: Connection):
+        """The next message of a worker; a worker that died (e.g. killed when memory ran out) is one line."""
+        try:
+            return conn.recv()
+        except (EOFError, OSError):
+            self._died(conn)
+
+    def _send(self, conn: Connection, msg: tuple) -> None:
+        try:
+            conn.send(msg)
+        except OSError:
+            self._died(conn)
+
+    def _died(self, conn: Connection) -> NoReturn:
+        proc = self.procs[self.conns.index(conn)]
+        proc.join(timeout=5.0)
+        self.close()
+        raise RuntimeError(f"a PyBullet worker process exited (exit code {proc.exitcode}; -9: killed, e.g. "
+                           "out of memory: fewer envs per worker)") from None
+
     def _gather(self) -> tuple[Tensor, Tensor]:
-        parts = [c.recv() for c in self.conns]
+        parts = [self._recv(c) for c in self.conns]
         return (torch.as_tensor(np.concatenate([p[0] for p in parts])),
                 torch.as_tensor(np.concatenate([p[1] for p in parts])))
 
@@ -126,14 +147,14 @@ class ScenePool:
         qn = q.detach().cpu().numpy()
         for (a, b), c in zip(self.blocks, self.conns, strict=True):
             sel = (ids >= a) & (ids < b)
-            c.send(("reset", (ids[sel] - a).tolist(), qn[sel]))
+            self._send(c, ("reset", (ids[sel] - a).tolist(), qn[sel]))
         return self._gather()
 
     def step(self, q: Tensor, qd: Tensor) -> tuple[Tensor, Tensor]:
         """Follow setpoints (N, C, D) in every scene; readings of all envs."""
         qn, vn = q.detach().cpu().numpy(), qd.detach().cpu().numpy()
         for (a, b), c in zip(self.blocks, self.conns, strict=True):
-            c.send(("step", qn[a:b], vn[a:b]))
+            self._send(c, ("step", qn[a:b], vn[a:b]))
         return self._gather()
 
     def close(self) -> None:
