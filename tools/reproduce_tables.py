@@ -151,7 +151,7 @@ def realtime(key: str, robot: str, split: str, profile: Profile, lay: Layout, re
         return
     episodes = 5 if profile.name == "quick" else 20
     sh([sys.executable, "-m", "pathrl.eval.realtime", robot, str(lay.test_data / split), str(out),
-        "--episodes", str(episodes)], logs / f"realtime_{key}.log")
+        "--episodes", str(episodes), *([] if profile.compile_limits else ["--eager"])], logs / f"realtime_{key}.log")
 
 
 def train_and_ship(model: str, e: Evaluation, profile: Profile, lay: Layout, logs: Path) -> None:
