@@ -170,11 +170,17 @@ def train_and_ship(model: str, e: Evaluation, profile: Profile, lay: Layout, log
     ship(run_dir, lay.models / model)
 
 
+def shipped(e: Evaluation, lay: Layout) -> bool:
+    """Whether the policy of ``e`` is shipped (rows of policies that are not show a dash)."""
+    model = lay.models / e.model
+    return (model / "model.pt").is_file() or any(model.glob("model_*.pt"))
+
+
 def evaluate(e: Evaluation, profile: Profile, lay: Layout, reuse: bool, logs: Path) -> None:
     model = lay.models / e.model
     raw = lay.out / "raw" / e.id
-    if not (model / "model.pt").is_file() and not any(model.glob("model_*.pt")):
-        return  # not shipped: the row shows a dash
+    if not shipped(e, lay):
+        return
     if reuse and (raw / "metrics.json").is_file():
         return
     cmd = [str(BIN / "pathrl-eval"), f"run_dir={model}", f"dataset.path={lay.test_data / e.data_robot / e.dataset}",
@@ -200,11 +206,12 @@ def toppra(b: Baseline, profile: Profile, lay: Layout, reuse: bool, logs: Path) 
 
 
 def collect(lay: Layout) -> dict:
-    """Load every metrics.json / TOPP-RA report of this output directory."""
+    """Load every metrics.json of a shipped policy and every TOPP-RA report of this output directory (an
+    evaluation of a policy that was since removed from ``models/`` is not shown)."""
     res: dict = {"evaluations": {}, "baselines": {}}
     for e in evaluations():
         p = lay.out / "raw" / e.id / "metrics.json"
-        if p.is_file():
+        if shipped(e, lay) and p.is_file():
             res["evaluations"][e.id] = json.loads(p.read_text())
     for b in baselines():
         p = lay.out / "raw" / f"{b.id}.json"
