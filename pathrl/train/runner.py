@@ -188,7 +188,6 @@ def write_json_atomic(path: Path, obj: Any) -> None:
 def train(cfg: dict[str, Any], run_dir: Path, resume: bool = False) -> dict[str, Any]:
     """Train (or resume) a policy; writes config.yaml, checkpoints, run.mcap and summary.json into `run_dir`."""
     torch.set_num_threads(int(cfg.get("threads", 1)))
-    kernels.set_compiled(bool(cfg.get("compile_limits", False)))
     torch.manual_seed(int(cfg["seed"]))
     run_dir.mkdir(parents=True, exist_ok=True)
     ckpt = latest_checkpoint(run_dir)
@@ -230,7 +229,8 @@ def train(cfg: dict[str, Any], run_dir: Path, resume: bool = False) -> dict[str,
     remaining = max(total - done_before, 0)
     t0 = time.perf_counter()
     if remaining:
-        runner.learn(num_learning_iterations=remaining)
+        with kernels.use_compiled(bool(cfg.get("compile_limits", False))):
+            runner.learn(num_learning_iterations=remaining)
     wall = time.perf_counter() - t0
     steps_per_iter = int(train_cfg["num_steps_per_env"]) * env.num_envs
     last_ckpt = latest_checkpoint(run_dir)
