@@ -13,7 +13,6 @@ point is within ``ON_PLATE_HEIGHT`` of the surface (the authors' check accepted 
 
 from __future__ import annotations
 
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -22,7 +21,7 @@ import pybullet as p
 
 from pathrl.envs.feedback import PLACE_MARGIN, PLATE_SIZE, USABLE_HALF
 from pathrl.robot.model import RobotSpec
-from pathrl.sim.scene import MotorScene, z_tilt_deg
+from pathrl.sim.scene import MotorScene, load_urdf_text, z_tilt_deg
 
 PLATE_MASS = 0.508  # kg
 ON_PLATE_HEIGHT = 0.01  # m
@@ -77,10 +76,7 @@ class BallOnPlateScene(MotorScene):
         super().__init__(control_rate, motor_force)
         self.robot = robot
         self.rng = np.random.default_rng(seed)
-        with tempfile.TemporaryDirectory() as tmp:
-            path = Path(tmp) / f"{robot.name}_plate.urdf"
-            path.write_text(plate_urdf(robot))
-            self.body = p.loadURDF(str(path), useFixedBase=True, physicsClientId=self.cid)
+        self.body = load_urdf_text(self.cid, plate_urdf(robot), f"{robot.name}_plate.urdf", fixed_base=True)
         names = {p.getJointInfo(self.body, j, physicsClientId=self.cid)[1].decode(): j
                  for j in range(p.getNumJoints(self.body, physicsClientId=self.cid))}
         self.joint_ids = [names[n] for n in robot.joints]

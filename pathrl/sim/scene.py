@@ -45,9 +45,14 @@ def collision_only_urdf(urdf: Path) -> str:
 def load_urdf(cid: int, urdf: Path, fixed_base: bool) -> int:
     """Load ``urdf`` into client ``cid`` without its visual meshes (:func:`collision_only_urdf`)."""
     urdf = Path(urdf).resolve()
+    return load_urdf_text(cid, collision_only_urdf(urdf), urdf.name, fixed_base)
+
+
+def load_urdf_text(cid: int, text: str, name: str, fixed_base: bool) -> int:
+    """Load URDF ``text`` (mesh paths absolute) into client ``cid`` through a temporary file ``name``."""
     with tempfile.TemporaryDirectory() as tmp:
-        path = Path(tmp) / urdf.name
-        path.write_text(collision_only_urdf(urdf))
+        path = Path(tmp) / name
+        path.write_text(text)
         return p.loadURDF(str(path), useFixedBase=fixed_base, physicsClientId=cid)
 
 
