@@ -224,3 +224,44 @@ def test_standing_task_refuses_other_robots(iiwa):
         make_feedback(cfg, iiwa, 2, 0)
     with pytest.raises(ValueError, match="backend=pybullet"):
         make_feedback({**cfg, "task": {"feedback": "standing", "backend": "analytic"}}, iiwa, 2, 0)
+
+
+def _actor(num_obs: int, num_actions: int):
+    from rsl_rl.models import MLPModel
+
+    obs = TensorDict({"policy": torch.zeros(1, num_obs)}, batch_size=[1])
+    return MLPModel(obs, {"actor": ["policy"]}, "actor", num_actions, [16, 8], "elu", True,
+                    {"class_name": "GaussianDistribution", "init_std": 0.2, "std_type": "scalar"})
+
+
+def test_warm_start_onto_more_joints_keeps_the_policy_and_holds_the_new_joints():
+    """A 2-joint source (joints b, c; path joint c) onto joints a, b, c plus 3 task inputs: the source's
+    actions come out unchanged for b and c whatever the new inputs hold, and the new joint a gets action 0."""
+    from pathrl.train.warm_start import input_columns, widen_outputs
+
+    torch.manual_seed(0)
+    rest = 5  # knots, progress, ... (path joints only)
+    src = _actor(3 * 2 + rest, 2)
+    state = src.state_dict()
+    state["obs_normalizer._mean"] = torch.randn(1, 11)
+    state["obs_normalizer._var"] = torch.rand(1, 11) + 0.5
+    state["obs_normalizer._std"] = state["obs_normalizer._var"].sqrt()
+    src.load_state_dict(state)
+    cols = input_columns(["b", "c"], ["a", "b", "c"], 11, 3 * 3 + rest + 3)
+    assert cols.tolist() == [1, 2, 4, 5, 7, 8, 9, 10, 11, 12, 13]
+    new = _actor(17, 3)
+    new.load_state_dict(widen_outputs(widen_inputs(state, 17, cols), torch.tensor([1, 2]), 3, 0.05))
+    new.eval(), src.eval()
+    x_src = torch.randn(4, 11)
+    x_new = torch.randn(4, 17)
+    x_new[:, cols] = x_src
+    with torch.no_grad():
+        a_src = src(TensorDict({"policy": x_src}, batch_size=[4]))
+        a_new = new(TensorDict({"policy": x_new}, batch_size=[4]))
+    torch.testing.assert_close(a_new[:, 1:], a_src)
+    assert a_new[:, 0].abs().max() == 0.0
+    assert new.state_dict()["distribution.std_param"][0] == pytest.approx(0.05)
+    with pytest.raises(WarmStartError, match="lacks"):
+        input_columns(["b", "z"], ["a", "b", "c"], 11, 17)
+    with pytest.raises(WarmStartError, match="do not line up"):
+        input_columns(["b", "c"], ["a", "b", "c"], 11, 12)

@@ -80,9 +80,12 @@ def test_run_mcap_survives_kill(tiny_dataset, tmp_path):
     got = scalars(run_dir)
     assert len(got) >= 3
     assert [m["iteration"] for m in got] == list(range(len(got)))
-    # and the killed run resumes from its last checkpoint
+    killed_wall = json.loads((run_dir / "summary.json").read_text())["wall_time_s"]  # recorded at checkpoints
+    assert killed_wall > 0.0
+    # and the killed run resumes from its last checkpoint; its wall time keeps the killed process's share
     r = run(train_cmd(tiny_dataset, run_dir, len(got) + 2, "resume=true"))
     assert r.returncode == 0, r.stderr[-2000:]
+    assert json.loads((run_dir / "summary.json").read_text())["wall_time_s"] > killed_wall
     iters = [m["iteration"] for m in scalars(run_dir)]
     assert iters[-1] == len(got) + 1
 

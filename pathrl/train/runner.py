@@ -152,7 +152,19 @@ class PathRLRunner(OnPolicyRunner):
         apply(next_it[0])
         self.alg.update = update_then_cap
 
+    _summary: Path | None = None
+    _wall: tuple[float, float] = (0.0, 0.0)
+
+    def track_wall_time(self, summary: Path, before_s: float) -> None:
+        """From now on every checkpoint also records the training wall time so far (`before_s` plus the time
+        since this call) in `summary`, so a run killed between sessions still accounts for its time."""
+        self._summary, self._wall = summary, (before_s, time.perf_counter())
+
     def save(self, path: str, infos: dict | None = None) -> None:
+        if self._summary is not None:
+            prev = json.loads(self._summary.read_text()) if self._summary.exists() else {}
+            wall = self._wall[0] + time.perf_counter() - self._wall[1]
+            write_json_atomic(self._summary, {**prev, "wall_time_s": wall})
         saved = self.alg.save()
         saved["iter"] = self.current_learning_iteration
         saved["infos"] = infos
@@ -220,7 +232,7 @@ def train(cfg: dict[str, Any], run_dir: Path, resume: bool = False) -> dict[str,
         from pathrl.train.warm_start import warm_start
 
         init_std = float(cfg["agent"]["actor"]["distribution_cfg"].get("init_std", 1.0))
-        warm_start(runner.alg, cfg["init_from"], env.num_obs, init_std)
+        warm_start(runner.alg, cfg["init_from"], env.num_obs, init_std, env.robot.joints, env.robot.path_joints)
     total = int(cfg["iterations"])
     anneal = cfg.get("std_anneal")
     if anneal:
@@ -228,6 +240,7 @@ def train(cfg: dict[str, Any], run_dir: Path, resume: bool = False) -> dict[str,
         runner.set_std_schedule(total, init_std, float(anneal["final"]), float(anneal["start"]))
     remaining = max(total - done_before, 0)
     t0 = time.perf_counter()
+    runner.track_wall_time(run_dir / "summary.json", float(prev.get("wall_time_s", 0.0)))
     if remaining:
         with kernels.use_compiled(bool(cfg.get("compile_limits", False))):
             runner.learn(num_learning_iterations=remaining)

@@ -1,15 +1,22 @@
-"""Warm start: begin a run from the weights of another (e.g. the tracking policy before adding ball feedback).
+"""Warm start: begin a run from the weights of another (e.g. the tracking policy before adding ball feedback,
+or the fixed-legs ARMAR-4 policy before its legs become actions).
 
-The new task's observation may be longer: its extra inputs are appended at the end of the state, so the
-first layer gets zero columns for them (the policy initially ignores them and behaves exactly like the
-source) and the observation normalizers start at mean 0 / std 1 there.
+The new run may observe more: extra joints (their position, velocity and acceleration sit in the three
+per-joint blocks at the front of the state) and task inputs (appended at the end). Each input of the source
+keeps its weights at its new column; new columns get zero weights and the observation normalizers start at
+mean 0 / std 1 there. New actions (extra joints) get zero output weights and bias: action 0, the middle of
+the joint's valid range, which holds a joint at rest. So the new policy initially behaves exactly like the
+source, with the new joints held still.
 """
 
 from __future__ import annotations
 
+import re
+from collections.abc import Sequence
 from pathlib import Path
 
 import torch
+import yaml
 from torch import Tensor
 
 
@@ -32,34 +39,98 @@ def source_checkpoint(path: str | Path) -> Path:
     return ckpt
 
 
-def widen_inputs(state: dict[str, Tensor], num_obs: int) -> dict[str, Tensor]:
-    """An MLPModel state dict widened to `num_obs` inputs: new inputs at the end, zero weights in mlp.0, the
-    obs normalizer at mean 0 / std 1 there."""
+def input_columns(src_joints: Sequence[str], joints: Sequence[str], src_obs: int, num_obs: int) -> Tensor:
+    """(src_obs,) column in the new state of every source input.
+
+    The state starts with three per-joint blocks (position, velocity, acceleration; D columns each); what
+    follows depends on the path joints only and keeps its order; new task inputs come last.
+    """
+    missing = [j for j in src_joints if j not in joints]
+    if missing:
+        raise WarmStartError(f"the source policy controls joints the new robot lacks: {missing}")
+    d_src, d = len(src_joints), len(joints)
+    rest = src_obs - 3 * d_src
+    if rest < 0 or 3 * d + rest > num_obs:
+        raise WarmStartError(f"source policy has {src_obs} inputs for {d_src} joints; the new env has "
+                             f"{num_obs} for {d}: the states do not line up")
+    at = torch.tensor([joints.index(j) for j in src_joints])
+    blocks = [b * d + at for b in range(3)]
+    return torch.cat([*blocks, 3 * d + torch.arange(rest)])
+
+
+def widen_inputs(state: dict[str, Tensor], num_obs: int, columns: Tensor | None = None) -> dict[str, Tensor]:
+    """An MLPModel state dict with `num_obs` inputs: source input i moves to `columns[i]` (default: i, new inputs
+    appended); new inputs get zero weights in mlp.0 and the obs normalizer at mean 0 / std 1."""
     w = state["mlp.0.weight"]
-    extra = num_obs - w.shape[1]
-    if extra < 0:
-        raise WarmStartError(f"source policy has {w.shape[1]} inputs, the new env only {num_obs}")
+    if columns is None:
+        if num_obs < w.shape[1]:
+            raise WarmStartError(f"source policy has {w.shape[1]} inputs, the new env only {num_obs}")
+        columns = torch.arange(w.shape[1])
     out = dict(state)
-    out["mlp.0.weight"] = torch.cat([w, w.new_zeros(w.shape[0], extra)], dim=1)
+    out["mlp.0.weight"] = w.new_zeros(w.shape[0], num_obs)
+    out["mlp.0.weight"][:, columns] = w
     for key, fill in (("obs_normalizer._mean", 0.0), ("obs_normalizer._var", 1.0), ("obs_normalizer._std", 1.0)):
         if key in state:
             v = state[key]
-            out[key] = torch.cat([v, v.new_full((*v.shape[:-1], extra), fill)], dim=-1)
+            out[key] = v.new_full((*v.shape[:-1], num_obs), fill)
+            out[key][..., columns] = v
     return out
 
 
-def warm_start(alg, source: str | Path, num_obs: int, init_std: float | None = None) -> Path:
-    """Load actor and critic of `source` into the PPO `alg` (inputs widened to `num_obs`); the action std is
-    reset to `init_std` (a converged source has almost no exploration left). Returns the checkpoint used."""
+def widen_outputs(state: dict[str, Tensor], rows: Tensor, num_out: int, std: float | None) -> dict[str, Tensor]:
+    """An MLPModel actor state dict with `num_out` actions: source action i moves to `rows[i]`; new actions get
+    zero weights and bias in the last layer (mean action 0) and the action std `std` (or the mean source std)."""
+    last = max(int(m.group(1)) for k in state if (m := re.fullmatch(r"mlp\.(\d+)\.weight", k)))
+    out = dict(state)
+    for key in (f"mlp.{last}.weight", f"mlp.{last}.bias"):
+        v = state[key]
+        out[key] = v.new_zeros(num_out, *v.shape[1:])
+        out[key][rows] = v
+    if "distribution.std_param" in state:
+        v = state["distribution.std_param"]
+        out["distribution.std_param"] = v.new_full((num_out,), float(std) if std is not None else float(v.mean()))
+        out["distribution.std_param"][rows] = v
+    return out
+
+
+def source_joints(ckpt: Path) -> tuple[list[str], list[str]] | None:
+    """(joints, path joints) of the robot the checkpoint was trained on, from the config.yaml beside it."""
+    cfg_path = ckpt.parent / "config.yaml"
+    if not cfg_path.is_file():
+        return None
+    try:
+        robot = (yaml.safe_load(cfg_path.read_text()) or {}).get("robot") or {}
+    except yaml.YAMLError as exc:
+        raise WarmStartError(f"{cfg_path}: invalid YAML ({str(exc).splitlines()[0]})") from None
+    if not isinstance(robot.get("joints"), list) or not isinstance(robot.get("path_joints"), list):
+        return None
+    return [str(j) for j in robot["joints"]], [str(j) for j in robot["path_joints"]]
+
+
+def warm_start(alg, source: str | Path, num_obs: int, init_std: float | None = None,
+               joints: Sequence[str] | None = None, path_joints: Sequence[str] | None = None) -> Path:
+    """Load actor and critic of `source` into the PPO `alg`. With the new robot's `joints` and `path_joints`
+    given, a source trained on fewer joints (same path joints) is mapped joint by joint; otherwise the inputs
+    are only widened at the end. The action std is reset to `init_std` (a converged source has almost no
+    exploration left). Returns the checkpoint used."""
     ckpt = source_checkpoint(source)
     try:
         loaded = torch.load(ckpt, weights_only=True, map_location="cpu")
         actor, critic = dict(loaded["actor_state_dict"]), dict(loaded["critic_state_dict"])
     except (RuntimeError, KeyError, EOFError, OSError) as exc:
         raise WarmStartError(f"{ckpt}: unreadable checkpoint ({str(exc).splitlines()[0]})") from None
-    actor, critic = widen_inputs(actor, num_obs), widen_inputs(critic, num_obs)
     if init_std is not None and "distribution.std_param" in actor:
         actor["distribution.std_param"] = torch.full_like(actor["distribution.std_param"], init_std)
+    src = source_joints(ckpt) if joints is not None else None
+    if src is not None and list(src[0]) != list(joints):
+        if path_joints is not None and list(src[1]) != list(path_joints):
+            raise WarmStartError(f"init_from={source}: path joints differ ({src[1]} vs {list(path_joints)})")
+        cols = input_columns(src[0], list(joints), actor["mlp.0.weight"].shape[1], num_obs)
+        rows = torch.tensor([list(joints).index(j) for j in src[0]])
+        actor = widen_outputs(widen_inputs(actor, num_obs, cols), rows, len(joints), init_std)
+        critic = widen_inputs(critic, num_obs, cols)
+    else:
+        actor, critic = widen_inputs(actor, num_obs), widen_inputs(critic, num_obs)
     try:
         alg.load({"actor_state_dict": actor, "critic_state_dict": critic}, {"actor": True, "critic": True}, True)
     except RuntimeError as exc:
