@@ -237,7 +237,7 @@ def _actor(num_obs: int, num_actions: int):
 def test_warm_start_onto_more_joints_keeps_the_policy_and_holds_the_new_joints():
     """A 2-joint source (joints b, c; path joint c) onto joints a, b, c plus 3 task inputs: the source's
     actions come out unchanged for b and c whatever the new inputs hold, and the new joint a gets action 0."""
-    from pathrl.train.warm_start import input_columns, widen_outputs
+    from pathrl.train.warm_start import input_columns, joint_rows, widen_outputs
 
     torch.manual_seed(0)
     rest = 5  # knots, progress, ... (path joints only)
@@ -247,7 +247,7 @@ def test_warm_start_onto_more_joints_keeps_the_policy_and_holds_the_new_joints()
     state["obs_normalizer._var"] = torch.rand(1, 11) + 0.5
     state["obs_normalizer._std"] = state["obs_normalizer._var"].sqrt()
     src.load_state_dict(state)
-    cols = input_columns(["b", "c"], ["a", "b", "c"], 11, 3 * 3 + rest + 3)
+    cols = input_columns(joint_rows(["b", "c"], ["a", "b", "c"]), 3, 11, 3 * 3 + rest + 3)
     assert cols.tolist() == [1, 2, 4, 5, 7, 8, 9, 10, 11, 12, 13]
     new = _actor(17, 3)
     new.load_state_dict(widen_outputs(widen_inputs(state, 17, cols), torch.tensor([1, 2]), 3, 0.05))
@@ -262,6 +262,6 @@ def test_warm_start_onto_more_joints_keeps_the_policy_and_holds_the_new_joints()
     assert a_new[:, 0].abs().max() == 0.0
     assert new.state_dict()["distribution.std_param"][0] == pytest.approx(0.05)
     with pytest.raises(WarmStartError, match="lacks"):
-        input_columns(["b", "z"], ["a", "b", "c"], 11, 17)
+        joint_rows(["b", "z"], ["a", "b", "c"])
     with pytest.raises(WarmStartError, match="do not line up"):
-        input_columns(["b", "c"], ["a", "b", "c"], 11, 12)
+        input_columns(joint_rows(["b", "c"], ["a", "b", "c"]), 3, 11, 12)

@@ -160,11 +160,14 @@ class PathRLRunner(OnPolicyRunner):
         since this call) in `summary`, so a run killed between sessions still accounts for its time."""
         self._summary, self._wall = summary, (before_s, time.perf_counter())
 
+    def wall_time_s(self) -> float:
+        """Training wall time so far (s), including the runs before a resume (see `track_wall_time`)."""
+        return self._wall[0] + time.perf_counter() - self._wall[1]
+
     def save(self, path: str, infos: dict | None = None) -> None:
         if self._summary is not None:
             prev = json.loads(self._summary.read_text()) if self._summary.exists() else {}
-            wall = self._wall[0] + time.perf_counter() - self._wall[1]
-            write_json_atomic(self._summary, {**prev, "wall_time_s": wall})
+            write_json_atomic(self._summary, {**prev, "wall_time_s": self.wall_time_s()})
         saved = self.alg.save()
         saved["iter"] = self.current_learning_iteration
         saved["infos"] = infos
@@ -239,19 +242,17 @@ def train(cfg: dict[str, Any], run_dir: Path, resume: bool = False) -> dict[str,
         init_std = float(cfg["agent"]["actor"]["distribution_cfg"].get("init_std", 1.0))
         runner.set_std_schedule(total, init_std, float(anneal["final"]), float(anneal["start"]))
     remaining = max(total - done_before, 0)
-    t0 = time.perf_counter()
     runner.track_wall_time(run_dir / "summary.json", float(prev.get("wall_time_s", 0.0)))
     if remaining:
         with kernels.use_compiled(bool(cfg.get("compile_limits", False))):
             runner.learn(num_learning_iterations=remaining)
-    wall = time.perf_counter() - t0
     steps_per_iter = int(train_cfg["num_steps_per_env"]) * env.num_envs
     last_ckpt = latest_checkpoint(run_dir)
     summary = {
         "experiment": cfg["experiment"],
         "iterations": total,
         "env_steps": total * steps_per_iter,
-        "wall_time_s": float(prev.get("wall_time_s", 0.0)) + wall,
+        "wall_time_s": runner.wall_time_s(),
         "num_envs": env.num_envs,
         "steps_per_iteration": steps_per_iter,
         "knot_gap_norm": env.knot_gap,

@@ -39,23 +39,26 @@ def source_checkpoint(path: str | Path) -> Path:
     return ckpt
 
 
-def input_columns(src_joints: Sequence[str], joints: Sequence[str], src_obs: int, num_obs: int) -> Tensor:
-    """(src_obs,) column in the new state of every source input.
+def joint_rows(src_joints: Sequence[str], joints: Sequence[str]) -> Tensor:
+    """(D_src,) index of every source joint among the new robot's `joints`."""
+    missing = [j for j in src_joints if j not in joints]
+    if missing:
+        raise WarmStartError(f"the source policy controls joints the new robot lacks: {missing}")
+    return torch.tensor([list(joints).index(j) for j in src_joints])
+
+
+def input_columns(rows: Tensor, d: int, src_obs: int, num_obs: int) -> Tensor:
+    """(src_obs,) column in the new state of every source input, the source joints at `rows` of `d` joints.
 
     The state starts with three per-joint blocks (position, velocity, acceleration; D columns each); what
     follows depends on the path joints only and keeps its order; new task inputs come last.
     """
-    missing = [j for j in src_joints if j not in joints]
-    if missing:
-        raise WarmStartError(f"the source policy controls joints the new robot lacks: {missing}")
-    d_src, d = len(src_joints), len(joints)
+    d_src = len(rows)
     rest = src_obs - 3 * d_src
     if rest < 0 or 3 * d + rest > num_obs:
         raise WarmStartError(f"source policy has {src_obs} inputs for {d_src} joints; the new env has "
                              f"{num_obs} for {d}: the states do not line up")
-    at = torch.tensor([joints.index(j) for j in src_joints])
-    blocks = [b * d + at for b in range(3)]
-    return torch.cat([*blocks, 3 * d + torch.arange(rest)])
+    return torch.cat([*(b * d + rows for b in range(3)), 3 * d + torch.arange(rest)])
 
 
 def widen_inputs(state: dict[str, Tensor], num_obs: int, columns: Tensor | None = None) -> dict[str, Tensor]:
@@ -125,8 +128,8 @@ def warm_start(alg, source: str | Path, num_obs: int, init_std: float | None = N
     if src is not None and list(src[0]) != list(joints):
         if path_joints is not None and list(src[1]) != list(path_joints):
             raise WarmStartError(f"init_from={source}: path joints differ ({src[1]} vs {list(path_joints)})")
-        cols = input_columns(src[0], list(joints), actor["mlp.0.weight"].shape[1], num_obs)
-        rows = torch.tensor([list(joints).index(j) for j in src[0]])
+        rows = joint_rows(src[0], joints)
+        cols = input_columns(rows, len(joints), actor["mlp.0.weight"].shape[1], num_obs)
         actor = widen_outputs(widen_inputs(actor, num_obs, cols), rows, len(joints), init_std)
         critic = widen_inputs(critic, num_obs, cols)
     else:
