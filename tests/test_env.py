@@ -155,3 +155,47 @@ def test_end_tolerance_counts_arrival_at_the_end_knot():
                 break
         assert bool(env.last_step["reached"][0]) is expect
         assert stopped is expect
+
+
+@pytest.mark.parametrize("mapping", ["centred", "posture", "linear"])
+def test_free_joints_hold_still_on_action_zero(mapping):
+    """ARMAR-4's legs are not on the path and start at 0, the knees on their lower limit: with the centred
+    mapping action 0 keeps every leg joint at rest while the arms track; the paper's linear mapping sends the
+    knees to half their admissible acceleration."""
+    env, _ = make_env("armar4_legs", num_envs=8, free_joint_actions=mapping, autoreset=False)
+    free = torch.ones(env.robot.dof, dtype=torch.bool)
+    free[env.path_index] = False
+    g = torch.Generator().manual_seed(0)
+    for _ in range(5):
+        act = torch.rand(8, env.robot.dof, generator=g) * 2 - 1
+        act[:, free] = 0.0
+        env.step(act)
+    legs = env.pos[:, free]
+    if mapping != "linear":
+        # (the knees' admissible range starts a hair above 0 on their limit: 6e-8 rad/s^2)
+        assert legs.abs().max() < 1e-6 and env.vel[:, free].abs().max() < 1e-6
+    else:
+        knees = [env.robot.joints.index(n) for n in ("leg_knee_joint_r0", "leg_knee_joint_r1")]
+        assert (env.pos[:, knees] > 0.01).all()
+    assert env.pos[:, env.path_index].abs().sum() > 0  # the arms did move
+
+
+def test_posture_pulls_biased_free_joints_back():
+    """A constant small bias on the leg actions: with ``centred`` it integrates twice (the legs drift away),
+    with ``posture`` the critically damped pull holds them near the start posture."""
+    drift = {}
+    for mapping in ("centred", "posture"):
+        env, _ = make_env("armar4_legs", num_envs=4, free_joint_actions=mapping, autoreset=False)
+        free = torch.ones(env.robot.dof, dtype=torch.bool)
+        free[env.path_index] = False
+        for _ in range(40):
+            act = torch.zeros(4, env.robot.dof)
+            act[:, free] = 0.02
+            env.step(act)
+        drift[mapping] = float(env.pos[:, free].abs().max())
+    assert drift["centred"] > 0.2 and drift["posture"] < 0.02, drift
+
+
+def test_free_joint_mapping_is_validated():
+    with pytest.raises(ValueError, match="free_joint_actions"):
+        make_env("armar4_legs", num_envs=2, free_joint_actions="tanh")

@@ -29,7 +29,7 @@ from pathrl.limits import _braking as braking_kernels
 from pathrl.limits import feasible
 from pathrl.limits.braking import braking_acceleration, braking_steps_bound, braking_within, is_stopped
 from pathrl.limits.check import limit_violations
-from pathrl.limits.feasible import JointLimits, action_to_acceleration, valid_acceleration_range
+from pathrl.limits.feasible import JointLimits, acceleration_to_action, action_to_acceleration, valid_acceleration_range
 from pathrl.limits.integrate import end_of_step, interpolate_step
 from pathrl.robot.model import load_robot_by_name
 
@@ -263,6 +263,26 @@ def test_action_to_acceleration() -> None:
     lo, hi = _t([[-2.0, 1.0]]), _t([[4.0, 3.0]])
     assert torch.equal(action_to_acceleration(_t([[-1.0, 1.0]]), lo, hi), _t([[-2.0, 3.0]]))
     assert torch.equal(action_to_acceleration(_t([[0.0, 5.0]]), lo, hi), _t([[1.0, 3.0]]))
+
+
+def test_action_to_acceleration_held_joints() -> None:
+    # joint 0: range [-2, 4] contains 0; joint 1: [1, 3] does not (0 -> 1, the nearest admissible value)
+    lo, hi = _t([[-2.0, 1.0]]), _t([[4.0, 3.0]])
+    hold = torch.tensor([True, True])
+    assert torch.equal(action_to_acceleration(_t([[0.0, 0.0]]), lo, hi, hold), _t([[0.0, 1.0]]))
+    assert torch.equal(action_to_acceleration(_t([[-1.0, -1.0]]), lo, hi, hold), _t([[-2.0, 1.0]]))
+    assert torch.equal(action_to_acceleration(_t([[1.0, 0.5]]), lo, hi, hold), _t([[4.0, 2.0]]))
+    assert torch.equal(action_to_acceleration(_t([[-0.5, -3.0]]), lo, hi, hold), _t([[-1.0, 1.0]]))
+    # only the held joint changes: joint 1 keeps the linear mapping
+    mixed = action_to_acceleration(_t([[0.0, 0.0]]), lo, hi, torch.tensor([True, False]))
+    assert torch.equal(mixed, _t([[0.0, 2.0]]))
+    # acceleration_to_action inverts the centred mapping (and clips what lies outside the range)
+    act = _t([[-1.0, -0.3, 0.0, 0.4, 1.0]])
+    lo5, hi5 = _t([[-2.0, -2.0, 1.0, -3.0, 0.5]]), _t([[4.0, -1.0, 3.0, 1.0, 2.0]])
+    back = acceleration_to_action(action_to_acceleration(act, lo5, hi5, torch.ones(5, dtype=torch.bool)), lo5, hi5)
+    torch.testing.assert_close(back[:, [0, 1, 3, 4]], act[:, [0, 1, 3, 4]])
+    assert float(back[0, 2]) == 0.0  # 0 is not admissible there: its nearest value c = 1 is action 0
+    assert torch.equal(acceleration_to_action(_t([[9.0, -9.0]]), lo, hi), _t([[1.0, -1.0]]))
 
 
 def test_joint_limits_validation_and_device() -> None:

@@ -111,6 +111,8 @@ class EnvCfg:
     knot_obs: str = "relative"  # relative | absolute (paper)
     end_obs: bool = True  # vector to the end knot + arc length left, at knot-gap scale
     end_tolerance: float | None = 0.05  # end reached within this weighted joint distance of the end knot (rad)
+    free_joint_actions: str = "centred"  # joints outside the path: centred (0 holds) | posture | linear (paper)
+    posture_omega: float = 3.0  # free_joint_actions=posture: pull to the start posture (rad/s)
 
 
 @dataclass

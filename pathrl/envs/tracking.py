@@ -20,6 +20,11 @@ MDP (paper, Sec. III; original_pathtracking.md 3-7):
 
 Fixed step order (per env, batched; every tensor is (N, ...)):
   1. clip actions; a1 = a_min + (1 + action) / 2 (a_max - a_min); envs in braking mode use the braking law.
+     Joints outside the path (ARMAR-4's legs) map action 0 to the admissible acceleration nearest 0
+     (``free_joint_actions=centred``, :func:`~pathrl.limits.feasible.action_to_acceleration`), so a new
+     joint with zero output weights holds still: a knee at rest on its limit would otherwise accelerate.
+     ``posture`` adds a critically damped pull back to the start posture: acceleration is a double
+     integrator, and without it a small bias of a leg action (0.01) drifts the leg by 0.5 rad in 6 s.
   2. integrate with linearly interpolated acceleration: `substeps` intermediate positions + end state.
   3. progress: arc length L_a of the polyline through the step's positions (path joints).
   4. deviation: each intermediate position vs the reference at the same arc length from the step start.
@@ -49,7 +54,12 @@ from torch import Tensor
 from pathrl.envs.feedback import Feedback
 from pathrl.envs.rewards import TASK_VALUES, RewardTerm, StepQuantities
 from pathrl.limits.braking import braking_within, is_stopped
-from pathrl.limits.feasible import JointLimits, action_to_acceleration, valid_acceleration_range
+from pathrl.limits.feasible import (
+    JointLimits,
+    acceleration_to_action,
+    action_to_acceleration,
+    valid_acceleration_range,
+)
 from pathrl.limits.integrate import end_of_step, interpolate_step
 from pathrl.paths.pathset import PathSet
 from pathrl.paths.segments import Segments, full_segments, sample_segments
@@ -86,10 +96,13 @@ class TrackingEnvCfg:
     end_tolerance: float | None = None  # also reached: within this (weighted, rad) of the end knot, < D arc left
     feedback_obs: bool = True  # with a feedback source: its sensor values are part of the state
     fail_terminates: bool = True  # with a feedback source: its failure (ball off the plate) ends the episode
+    free_joint_actions: str = "centred"  # joints outside the path: centred (0 holds) | posture | linear (paper)
+    posture_omega: float = 3.0  # free_joint_actions=posture: natural frequency of the pull to the start posture (rad/s)
     autoreset: bool = True
 
 
 TERMINATION_REASONS = ("robot_stopped", "deviation", "task_failed", "time_out")
+FREE_JOINT_ACTIONS = ("centred", "posture", "linear")
 
 
 class PathTrackingEnv(_VecEnvBase):
@@ -124,6 +137,13 @@ class PathTrackingEnv(_VecEnvBase):
         if self.paths.dof != robot.path_dof:
             raise ValueError(f"paths have {self.paths.dof} joints, robot {robot.name} has {robot.path_dof} path joints")
         self.path_index = torch.as_tensor(robot.path_index, device=self.device)
+        if cfg.free_joint_actions not in FREE_JOINT_ACTIONS:
+            raise ValueError(f"env.free_joint_actions must be one of {FREE_JOINT_ACTIONS}, "
+                             f"got {cfg.free_joint_actions!r}")
+        self.hold = torch.ones(robot.dof, dtype=torch.bool, device=self.device)  # joints mapped around 0
+        self.hold[self.path_index] = False
+        if cfg.free_joint_actions == "linear":
+            self.hold[:] = False
         self.knot_gap = float(cfg.knot_gap_norm or self.paths.max_knot_gap())
         self.horizon = (cfg.n_state - 1) * self.knot_gap
         w = torch.as_tensor(robot.deviation_weights, dtype=torch.float64, device=self.device)
@@ -270,11 +290,23 @@ class PathTrackingEnv(_VecEnvBase):
         return TensorDict({"policy": self._obs}, batch_size=[self.num_envs], device=self.device)
 
     # ------------------------------------------------------------------ step
+    def accelerations(self, actions: Tensor) -> Tensor:
+        """Accelerations (N, D) at the end of the next step for `actions` (N, D) (step 1 of the step order).
+
+        With ``free_joint_actions=posture`` the free joints' actions are corrections to a critically damped
+        pull back to the start posture (0): a1 = PD(q, v) + action, in the centred action scale.
+        """
+        if self.cfg.free_joint_actions == "posture":
+            w = self.cfg.posture_omega
+            pull = acceleration_to_action(-(w * w) * self.pos - (2.0 * w) * self.vel, self.a_min, self.a_max)
+            actions = torch.where(self.hold, actions.clamp(-1.0, 1.0) + pull, actions)
+        return action_to_acceleration(actions, self.a_min, self.a_max, self.hold)
+
     def step(self, actions: Tensor) -> tuple[TensorDict, Tensor, Tensor, dict]:
         cfg = self.cfg
         actions = actions.to(device=self.device, dtype=torch.float64)
         action_absmax = actions.abs().amax(dim=1)
-        a1 = action_to_acceleration(actions.clamp(-1.0, 1.0), self.a_min, self.a_max)
+        a1 = self.accelerations(actions)
         if bool(self.braking.any()):
             brake = braking_within(self.vel, self.acc, self.a_min, self.a_max, cfg.dt, cfg.stop_tolerance)
             a1 = torch.where(self.braking.unsqueeze(1), brake, a1)

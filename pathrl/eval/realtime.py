@@ -23,7 +23,6 @@ from pathrl.dataset.io import load_pathset
 from pathrl.envs.rewards import build_reward_terms
 from pathrl.envs.tracking import PathTrackingEnv, TrackingEnvCfg
 from pathrl.limits import kernels
-from pathrl.limits.feasible import action_to_acceleration
 from pathrl.limits.integrate import interpolate_step
 from pathrl.paths.knots import KnotStrategy
 from pathrl.paths.segments import Segments, evaluation_plan
@@ -101,7 +100,7 @@ def _timed_episodes(env: PathTrackingEnv, mlp: torch.nn.Module, plan: Segments, 
             t0 = time.process_time()
             with torch.inference_mode():
                 act = mlp(env.get_observations()["policy"]).to(torch.float64)
-            a1 = action_to_acceleration(act, env.a_min, env.a_max)
+            a1 = env.accelerations(act)
             q, qd, _ = interpolate_step(env.pos, env.vel, env.acc, a1, cfg.dt, c)
             dt = time.process_time() - t0
             _, _, done, _ = env.step(act)

@@ -96,9 +96,30 @@ class JointLimits:
         return int(self.vel.shape[0])
 
 
-def action_to_acceleration(action: Tensor, a_min: Tensor, a_max: Tensor) -> Tensor:
-    """Map actions in [-1, 1] (clipped) linearly onto ``[a_min, a_max]``; all (N, D)."""
-    return a_min + 0.5 * (1.0 + action.clamp(-1.0, 1.0)) * (a_max - a_min)
+def action_to_acceleration(action: Tensor, a_min: Tensor, a_max: Tensor, hold: Tensor | None = None) -> Tensor:
+    """Map actions in [-1, 1] (clipped) onto ``[a_min, a_max]``; all (N, D).
+
+    Linear by default (the paper's mapping). Joints where ``hold`` (D,) bool is set map piecewise linearly
+    around the admissible acceleration nearest 0, ``c = clip(0, a_min, a_max)``: -1 -> a_min, 0 -> c,
+    1 -> a_max. Action 0 then keeps such a joint's velocity whenever the limits allow it, so a joint at rest
+    stays at rest even at a position limit, where the linear mapping's midpoint would accelerate it.
+    """
+    action = action.clamp(-1.0, 1.0)
+    linear = a_min + 0.5 * (1.0 + action) * (a_max - a_min)
+    if hold is None or not bool(hold.any()):
+        return linear
+    c = torch.minimum(torch.maximum(torch.zeros_like(a_min), a_min), a_max)
+    centred = torch.where(action >= 0.0, c + action * (a_max - c), c + action * (c - a_min))
+    return torch.where(hold, centred, linear)
+
+
+def acceleration_to_action(acc: Tensor, a_min: Tensor, a_max: Tensor) -> Tensor:
+    """Inverse of the centred mapping of :func:`action_to_acceleration`: the action in [-1, 1] whose
+    acceleration is `acc` (clipped into ``[a_min, a_max]``); all (N, D)."""
+    c = torch.minimum(torch.maximum(torch.zeros_like(a_min), a_min), a_max)
+    up = (acc - c) / (a_max - c).clamp(min=1e-12)
+    down = (acc - c) / (c - a_min).clamp(min=1e-12)
+    return torch.where(acc >= c, up, down).clamp(-1.0, 1.0)
 
 
 def valid_acceleration_range(p: Tensor, v: Tensor, a: Tensor, limits: JointLimits,

@@ -50,6 +50,8 @@ def env_cfg_from(cfg: dict[str, Any], num_envs: int | None = None, seed: int | N
         end_tolerance=None if e.get("end_tolerance") is None else float(e["end_tolerance"]),
         feedback_obs=bool(task["observe"]),
         fail_terminates=bool(task["fail_terminates"]),
+        free_joint_actions=str(e.get("free_joint_actions", "centred")),
+        posture_omega=float(e.get("posture_omega", 3.0)),
     )
 
 
