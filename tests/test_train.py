@@ -125,3 +125,13 @@ def test_ball_task_warm_start_train_and_pybullet_eval(tiny_dataset, tmp_path):
     # a warm start from nowhere is one clear line
     r = run(train_cmd(tiny_dataset, tmp_path / "x", 1, f"init_from={tmp_path / 'missing'}"))
     assert r.returncode != 0 and "init_from" in r.stderr.strip().splitlines()[-1]
+
+
+def test_resume_accepts_keys_added_later_only_at_their_old_behaviour():
+    from pathrl.train.runner import _config_diff
+
+    saved = {"env": {"num_envs": 8}, "iterations": 5}
+    now = {"env": {"num_envs": 8, "free_joint_actions": "linear", "posture_omega": 3.0}, "iterations": 9}
+    assert _config_diff(saved, now, ignore={"iterations"}) == ""
+    now["env"]["free_joint_actions"] = "posture"
+    assert "free_joint_actions" in _config_diff(saved, now, ignore={"iterations"})

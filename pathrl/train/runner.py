@@ -25,6 +25,11 @@ from pathrl.robot.model import RobotSpec, load_robot
 CHECKPOINT_RE = re.compile(r"^model_(\d+)\.pt$")
 
 
+#: Config keys added after runs were saved, with the value that reproduces what those runs did: a saved config
+#: without the key resumes under a config holding this value (and is evaluated with it, `env_cfg_from`).
+ADDED_KEYS: dict[str, Any] = {"env.free_joint_actions": "linear", "env.posture_omega": 3.0}
+
+
 def env_cfg_from(cfg: dict[str, Any], num_envs: int | None = None, seed: int | None = None,
                  knot_gap_norm: float | None = None) -> TrackingEnvCfg:
     e, task = cfg["env"], task_cfg(cfg)
@@ -50,8 +55,8 @@ def env_cfg_from(cfg: dict[str, Any], num_envs: int | None = None, seed: int | N
         end_tolerance=None if e.get("end_tolerance") is None else float(e["end_tolerance"]),
         feedback_obs=bool(task["observe"]),
         fail_terminates=bool(task["fail_terminates"]),
-        free_joint_actions=str(e.get("free_joint_actions", "centred")),
-        posture_omega=float(e.get("posture_omega", 3.0)),
+        free_joint_actions=str(e.get("free_joint_actions", ADDED_KEYS["env.free_joint_actions"])),
+        posture_omega=float(e.get("posture_omega", ADDED_KEYS["env.posture_omega"])),
     )
 
 
@@ -269,6 +274,9 @@ def _config_diff(a: Any, b: Any, ignore: set[str], prefix: str = "") -> str:
     if isinstance(a, dict) and isinstance(b, dict):
         for k in sorted(set(a) | set(b)):
             if not prefix and k in ignore:
+                continue
+            key = f"{prefix}{k}"
+            if k not in a and key in ADDED_KEYS and b[k] == ADDED_KEYS[key]:
                 continue
             d = _config_diff(a.get(k), b.get(k), ignore, f"{prefix}{k}.")
             if d:
