@@ -83,3 +83,6 @@ def test_warm_starts_match_the_experiments():
 
     for model, source in WARM_STARTS.items():
         assert _compose([f"+experiment={model}"]).init_from == f"models/{source}"
+    for path in sorted((ROOT / "conf" / "experiment").glob("*.yaml")):  # and every warm start is listed
+        if "init_from" in path.read_text():
+            assert path.stem in WARM_STARTS, path.stem

@@ -217,6 +217,11 @@ def collect(lay: Layout) -> dict:
         p = lay.out / "raw" / f"{b.id}.json"
         if p.is_file():
             res["baselines"][b.id] = json.loads(p.read_text())
+    res["training"] = {}
+    for model in dict.fromkeys(e.model for e in evaluations()):
+        p = lay.models / model / "summary.json"
+        if (lay.models / model).is_dir() and p.is_file():
+            res["training"][model] = json.loads(p.read_text())
     res["realtime"] = {}
     for key, _, _ in REALTIME:
         p = lay.out / "raw" / f"realtime_{key}.json"

@@ -1,8 +1,8 @@
 """Render reproduced tables next to the paper's values: Markdown, CSV rows and LaTeX.
 
 Pure functions of ``results`` = ``{"evaluations": {evaluation_id: metrics.json}, "baselines":
-{baseline_id: toppra.json}}`` and the paper's tables (``paper_tables.yaml``), so the output is fixed by
-its inputs (tests/golden/tables.md).
+{baseline_id: toppra.json}, "realtime": {key: realtime.json}, "training": {model: summary.json}}`` and the
+paper's tables (``paper_tables.yaml``), so the output is fixed by its inputs (tests/golden/tables.md).
 """
 
 from __future__ import annotations
@@ -10,6 +10,7 @@ from __future__ import annotations
 from typing import Any
 
 from pathrl.repro.tables import (
+    AUTHORS_BUDGETS,
     REALTIME,
     ROWS,
     SHORT_COLUMNS,
@@ -22,6 +23,7 @@ from pathrl.repro.tables import (
     TABLE_VI,
     TABLE_VII,
     TABLE_VIII,
+    WARM_STARTS,
     Row,
 )
 
@@ -142,6 +144,31 @@ def _table_ix(results: dict[str, Any], paper: dict[str, Any]) -> tuple[list[str]
     return lines, csv_rows
 
 
+def _theirs(model: str) -> str:
+    b = AUTHORS_BUDGETS.get(model)
+    return "–" if b is None else f"{b[0]} / {b[1]:.0f}"
+
+
+def _training(results: dict[str, Any]) -> list[str]:
+    """Budgets of the shipped policies (``results["training"]``: model -> its summary.json)."""
+    budgets = results.get("training") or {}
+    if not budgets:
+        return []
+    lines = ["## Training budgets of the shipped policies", "",
+             "From `models/<policy>/summary.json`; wall time on the 2-core reference machine (a warm-started "
+             "policy's budget excludes its source's). The authors' budget from their checkpoints' metadata.", "",
+             "| policy | PPO iterations | env steps (M) | envs | wall time (min) | warm start from | "
+             "authors: env steps (M) / wall time (h) |",
+             "|---|---|---|---|---|---|---|"]
+    for model, sm in budgets.items():
+        steps = sm.get("env_steps")
+        wall = sm.get("wall_time_s")
+        lines.append(f"| {model} | {sm.get('iterations', '–')} | {_fmt(None if steps is None else steps / 1e6, 1)} | "
+                     f"{sm.get('num_envs', '–')} | {_fmt(None if wall is None else wall / 60.0, 0)} | "
+                     f"{WARM_STARTS.get(model, '–')} | {_theirs(model)} |")
+    return lines
+
+
 def _table_v(paper: dict[str, Any]) -> list[str]:
     lines = ["## Table V: features (TOPP-RA vs learned)", "", "| feature | TOPP-RA | ours |", "|---|---|---|"]
     for k, (a, b) in paper[TABLE_V]["rows"].items():
@@ -168,6 +195,9 @@ def render_markdown(results: dict[str, Any], paper: dict[str, Any], profile: str
     body, rows = _table_ix(results, paper)
     lines += [""] + body
     csv_rows += rows
+    training = _training(results)
+    if training:
+        lines += [""] + training
     missing = sorted({r.evaluation.model for r in ROWS if _metrics(results, r) is None})
     if missing:
         lines += ["", "Policies not shipped yet (train with `make reproduce-tables TRAIN=1` or "

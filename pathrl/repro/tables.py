@@ -126,7 +126,16 @@ ROWS: tuple[Row, ...] = (
 
 #: Rows trained from another row's policy (conf/experiment/<model>.yaml: init_from: models/<source>).
 WARM_STARTS = {"iiwa7_ball_balancing_reward": "iiwa7_ball_balancing",
-               "armar4_target_point_balancing": "armar4_target_point"}
+               "armar4_target_point_balancing": "armar4_target_point",
+               "armar4_legs_target_point_balancing": "armar4_target_point"}
+
+
+#: The authors' budget per policy: (million env steps, wall time in hours), from their checkpoints' training
+#: metadata (iterations x train batch; Ray RLlib on a cluster node).
+AUTHORS_BUDGETS = {"iiwa7_random": (195, 45.2), "iiwa7_target_point": (300, 65.3),
+                   "iiwa7_ball_balancing": (150, 30.8), "iiwa7_ball_balancing_reward": (629, 122.5),
+                   "armar6_random": (619, 238.4), "armar4_random": (137, 137.0), "armar4_target_point": (110, 93.8),
+                   "armar4_target_point_balancing": (156, 176.8), "armar4_legs_target_point_balancing": (169, 229.9)}
 
 
 def evaluations(rows: tuple[Row, ...] = ROWS) -> list[Evaluation]:
