@@ -220,7 +220,7 @@ def collect(lay: Layout) -> dict:
     res["training"] = {}
     for model in dict.fromkeys(e.model for e in evaluations()):
         p = lay.models / model / "summary.json"
-        if (lay.models / model).is_dir() and p.is_file():
+        if p.is_file():
             res["training"][model] = json.loads(p.read_text())
     res["realtime"] = {}
     for key, _, _ in REALTIME:

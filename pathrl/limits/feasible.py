@@ -96,6 +96,11 @@ class JointLimits:
         return int(self.vel.shape[0])
 
 
+def _nearest_to_zero(a_min: Tensor, a_max: Tensor) -> Tensor:
+    """The admissible acceleration nearest 0, ``clip(0, a_min, a_max)``; (N, D)."""
+    return torch.minimum(torch.maximum(torch.zeros_like(a_min), a_min), a_max)
+
+
 def action_to_acceleration(action: Tensor, a_min: Tensor, a_max: Tensor, hold: Tensor | None = None) -> Tensor:
     """Map actions in [-1, 1] (clipped) onto ``[a_min, a_max]``; all (N, D).
 
@@ -108,7 +113,7 @@ def action_to_acceleration(action: Tensor, a_min: Tensor, a_max: Tensor, hold: T
     linear = a_min + 0.5 * (1.0 + action) * (a_max - a_min)
     if hold is None or not bool(hold.any()):
         return linear
-    c = torch.minimum(torch.maximum(torch.zeros_like(a_min), a_min), a_max)
+    c = _nearest_to_zero(a_min, a_max)
     centred = torch.where(action >= 0.0, c + action * (a_max - c), c + action * (c - a_min))
     return torch.where(hold, centred, linear)
 
@@ -116,7 +121,7 @@ def action_to_acceleration(action: Tensor, a_min: Tensor, a_max: Tensor, hold: T
 def acceleration_to_action(acc: Tensor, a_min: Tensor, a_max: Tensor) -> Tensor:
     """Inverse of the centred mapping of :func:`action_to_acceleration`: the action in [-1, 1] whose
     acceleration is `acc` (clipped into ``[a_min, a_max]``); all (N, D)."""
-    c = torch.minimum(torch.maximum(torch.zeros_like(a_min), a_min), a_max)
+    c = _nearest_to_zero(a_min, a_max)
     up = (acc - c) / (a_max - c).clamp(min=1e-12)
     down = (acc - c) / (c - a_min).clamp(min=1e-12)
     return torch.where(acc >= c, up, down).clamp(-1.0, 1.0)

@@ -156,7 +156,8 @@ def _training(results: dict[str, Any]) -> list[str]:
         return []
     lines = ["## Training budgets of the shipped policies", "",
              "From `models/<policy>/summary.json`; wall time on the 2-core reference machine, not always idle (a "
-             "warm-started policy's budget excludes its source's). The authors' budget from their checkpoints' metadata.", "",
+             "warm-started policy's budget excludes its source's). The authors' budget from their checkpoints' "
+             "metadata.", "",
              "| policy | PPO iterations | env steps (M) | envs | wall time (min) | warm start from | "
              "authors: env steps (M) / wall time (h) |",
              "|---|---|---|---|---|---|---|"]
