@@ -28,7 +28,7 @@ bench: setup
 	$(PY) tools/bench.py
 
 reproduce-tables: setup
-	$(PY) tools/reproduce_tables.py $(if $(PROFILE),--profile $(PROFILE)) $(if $(TRAIN),--train)
+	$(PY) tools/reproduce_tables.py $(if $(PROFILE),--profile $(PROFILE)) $(if $(TRAIN),--train) $(if $(JOBS),--jobs $(JOBS))
 
 view-demo: setup
 	tools/view_demo.sh

@@ -11,8 +11,10 @@ Profiles:
          whole pipeline in a few minutes; the numbers mean nothing).
 --train (TRAIN=1) trains every policy first (`pathrl-train +experiment=<model> resume=true`, budgets in
 conf/experiment/*.yaml; rerun to resume after an interruption) and ships it to models/<model>.
+Evaluations and TOPP-RA baselines run --jobs at a time (JOBS=N; default the CPU count, at most 8); the
+real-time measurements of Table IX run last, one at a time on the otherwise idle machine.
 
-    tools/reproduce_tables.py [--profile full|quick] [--train] [--only MODEL,...] [--reuse] [--out DIR]
+    tools/reproduce_tables.py [--profile full|quick] [--train] [--only MODEL,...] [--reuse] [--out DIR] [--jobs N]
 """
 
 from __future__ import annotations
@@ -78,10 +80,18 @@ class Layout:
         return cls(out, ROOT / "models", ROOT / "runs", ROOT / "datasets", ROOT / "data")
 
 
+#: Phases of a plan, in order. Steps of a phase named in CONCURRENT run ``--jobs`` at a time (independent
+#: evaluations, one process each); the others run one at a time: trainings (never two on 2 cores) and the
+#: real-time measurements of Table IX (they time computation, so they run on an otherwise idle machine).
+PHASES = ("prepare", "evaluate", "timing")
+CONCURRENT = {"evaluate"}
+
+
 @dataclass
 class Step:
     label: str
     run: Callable[[], None]
+    phase: str
     failed: str | None = None
     seconds: float = 0.0
 
@@ -90,8 +100,12 @@ class Step:
 class Plan:
     steps: list[Step] = field(default_factory=list)
 
-    def add(self, label: str, fn: Callable[[], None]) -> None:
-        self.steps.append(Step(label, fn))
+    def add(self, phase: str, label: str, fn: Callable[[], None]) -> None:
+        assert phase in PHASES, phase
+        self.steps.append(Step(label, fn, phase))
+
+    def phase(self, name: str) -> list[Step]:
+        return [s for s in self.steps if s.phase == name]
 
 
 class StepFailed(RuntimeError):
@@ -122,7 +136,7 @@ def build_plan(args: argparse.Namespace, profile: Profile, lay: Layout) -> Plan:
         if profile.name == "quick":
             for robot, name in sorted(needed):
                 dest = lay.train_data / robot / name
-                plan.add(f"dataset {robot}/{name}", lambda robot=robot, name=name, dest=dest: None if (
+                plan.add("prepare", f"dataset {robot}/{name}", lambda robot=robot, name=name, dest=dest: None if (
                     dest / "dataset.json").is_file() and args.reuse else sh(
                     [str(BIN / "pathrl-dataset"), "generate", f"robot={robot}", f"dataset={name}",
                      f"dataset.num_train={profile.num_train}", f"dataset.num_test={profile.num_test}",
@@ -133,15 +147,20 @@ def build_plan(args: argparse.Namespace, profile: Profile, lay: Layout) -> Plan:
                 continue
             trained.setdefault(e.model, e)
         for model, e in trained.items():
-            plan.add(f"train {model}", lambda model=model, e=e: train_and_ship(model, e, profile, lay, logs))
-    for e in evals:
-        plan.add(f"evaluate {e.id}", lambda e=e: evaluate(e, profile, lay, args.reuse, logs))
+            plan.add("prepare", f"train {model}", lambda model=model, e=e: train_and_ship(model, e, profile, lay, logs))
+    # Longest first so that the concurrent phase ends with both lanes busy: simulated (PyBullet) evaluations,
+    # then TOPP-RA, then the kinematic evaluations.
+    for e in sorted(evals, key=lambda e: not e.task):
+        plan.add("evaluate", f"evaluate {e.id}", lambda e=e: evaluate(e, profile, lay, args.reuse, logs))
+    toppra_workers = 1 if args.jobs > 1 else 2
     for b in bases:
-        plan.add(f"TOPP-RA {b.robot}/{b.dataset} ({b.segments})", lambda b=b: toppra(b, profile, lay, args.reuse, logs))
+        plan.add("evaluate", f"TOPP-RA {b.robot}/{b.dataset} ({b.segments})",
+                 lambda b=b: toppra(b, profile, lay, args.reuse, logs, toppra_workers))
     if only is None:
         for key, robot, split in REALTIME:
-            plan.add(f"real time {key}", lambda key=key, robot=robot, split=split: realtime(
+            plan.add("timing", f"real time {key}", lambda key=key, robot=robot, split=split: realtime(
                 key, robot, split, profile, lay, args.reuse, logs))
+    plan.steps.sort(key=lambda s: PHASES.index(s.phase))  # stable: keeps the order within a phase
     return plan
 
 
@@ -194,12 +213,12 @@ def evaluate(e: Evaluation, profile: Profile, lay: Layout, reuse: bool, logs: Pa
     sh(cmd, logs / f"eval_{e.id}.log")
 
 
-def toppra(b: Baseline, profile: Profile, lay: Layout, reuse: bool, logs: Path) -> None:
+def toppra(b: Baseline, profile: Profile, lay: Layout, reuse: bool, logs: Path, workers: int) -> None:
     out = lay.out / "raw" / f"{b.id}.json"
     if reuse and out.is_file():
         return
     cmd = [str(BIN / "pathrl-toppra"), f"robot={b.robot}", f"dataset.path={lay.test_data / b.robot / b.dataset}",
-           f"knots={b.knots}", f"segments={b.segments}", "seed=0", "workers=2", f"out={out}"]
+           f"knots={b.knots}", f"segments={b.segments}", "seed=0", f"workers={workers}", f"out={out}"]
     if profile.episodes is not None:
         cmd.append(f"episodes={profile.episodes}")
     sh(cmd, logs / f"{b.id}.log")
@@ -254,6 +273,46 @@ def write_outputs(lay: Layout, profile: Profile) -> str:
     return md
 
 
+def run_plan(plan: Plan, jobs: int) -> None:
+    """Run the plan's phases in order with a progress bar; a failed step is reported and does not stop the
+    others (its rows show a dash)."""
+    from concurrent.futures import ThreadPoolExecutor
+    from threading import Lock
+
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    running: list[str] = []
+    lock = Lock()
+    with Progress(TextColumn("[bold]reproduce-tables"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                  TextColumn("{task.description}")) as bar:
+        task = bar.add_task("", total=len(plan.steps))
+
+        def run(step: Step) -> None:
+            with lock:
+                running.append(step.label)
+                bar.update(task, description=" | ".join(running))
+            ts = time.perf_counter()
+            try:
+                step.run()
+            except (StepFailed, FileNotFoundError) as exc:
+                step.failed = str(exc)
+                bar.console.print(f"[red]FAILED[/red] {step.label}: {exc}")
+            step.seconds = time.perf_counter() - ts
+            with lock:
+                running.remove(step.label)
+                bar.console.print(f"{'failed' if step.failed else 'done':>6}  {step.label}  ({step.seconds:.0f} s)")
+                bar.update(task, advance=1, description=" | ".join(running))
+
+        for phase in PHASES:
+            steps = plan.phase(phase)
+            if phase in CONCURRENT and jobs > 1:
+                with ThreadPoolExecutor(jobs) as pool:
+                    list(pool.map(run, steps))
+            else:
+                for step in steps:
+                    run(step)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--profile", choices=sorted(PROFILES), default="full")
@@ -261,8 +320,12 @@ def main() -> None:
     ap.add_argument("--only", default="", help="comma-separated model names: only their rows")
     ap.add_argument("--reuse", action="store_true", help="keep evaluation / TOPP-RA results already in --out")
     ap.add_argument("--out", default=None, help="output dir (default results/, quick: results/quick/)")
+    ap.add_argument("--jobs", type=int, default=min(os.cpu_count() or 1, 8),
+                    help="evaluations run at a time (default: the CPU count, at most 8)")
     args = ap.parse_args()
     profile = PROFILES[args.profile]
+    if args.jobs < 1:
+        sys.exit(f"error: --jobs must be >= 1, got {args.jobs}")
     out = Path(args.out) if args.out else ROOT / ("results" if profile.name == "full" else "results/quick")
     known = {r.evaluation.model for r in ROWS}
     unknown = set(filter(None, args.only.split(","))) - known
@@ -271,23 +334,8 @@ def main() -> None:
     lay = Layout.of(profile, out.resolve(), args.train)
     plan = build_plan(args, profile, lay)
 
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
-
     t0 = time.perf_counter()
-    with Progress(TextColumn("[bold]reproduce-tables"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-                  TextColumn("{task.description}")) as bar:
-        task = bar.add_task("", total=len(plan.steps))
-        for step in plan.steps:
-            bar.update(task, description=step.label)
-            ts = time.perf_counter()
-            try:
-                step.run()
-            except (StepFailed, FileNotFoundError) as exc:
-                step.failed = str(exc)
-                bar.console.print(f"[red]FAILED[/red] {step.label}: {exc}")
-            step.seconds = time.perf_counter() - ts
-            bar.console.print(f"{'failed' if step.failed else 'done':>6}  {step.label}  ({step.seconds:.0f} s)")
-            bar.advance(task)
+    run_plan(plan, args.jobs)
     md = write_outputs(lay, profile)
     print(md)
     failed = [s for s in plan.steps if s.failed]
