@@ -53,7 +53,7 @@ class Profile:
     num_train: int  # paths of generated datasets (--train)
     num_test: int
     train_overrides: tuple[str, ...] = ()
-    compile_limits: bool = True  # torch.compile the limit kernels in trainings and evaluations
+    compile_limits: bool = True  # torch.compile the limit kernels in trainings and real-time measurements
 
 
 PROFILES = {
@@ -195,6 +195,15 @@ def shipped(e: Evaluation, lay: Layout) -> bool:
     return (model / "model.pt").is_file() or any(model.glob("model_*.pt"))
 
 
+def rel(path: Path) -> Path:
+    """`path` relative to the repository (the commands' working directory) when inside it: results record
+    the paths they were made from, and the committed ones should not name one machine's checkout."""
+    try:
+        return path.relative_to(ROOT)
+    except ValueError:
+        return path
+
+
 def evaluate(e: Evaluation, profile: Profile, lay: Layout, reuse: bool, logs: Path) -> None:
     model = lay.models / e.model
     raw = lay.out / "raw" / e.id
@@ -202,8 +211,9 @@ def evaluate(e: Evaluation, profile: Profile, lay: Layout, reuse: bool, logs: Pa
         return
     if reuse and (raw / "metrics.json").is_file():
         return
-    cmd = [str(BIN / "pathrl-eval"), f"run_dir={model}", f"dataset.path={lay.test_data / e.data_robot / e.dataset}",
-           f"segments={e.segments}", "seed=0", f"out={raw}", f"compile_limits={str(profile.compile_limits).lower()}"]
+    data = rel(lay.test_data / e.data_robot / e.dataset)
+    cmd = [str(BIN / "pathrl-eval"), f"run_dir={rel(model)}", f"dataset.path={data}",
+           f"segments={e.segments}", "seed=0", f"out={raw}"]  # eager limits (pathrl-eval's default: faster here)
     if profile.episodes is not None:
         cmd.append(f"episodes={profile.episodes}")
     elif e.episodes is not None:

@@ -66,7 +66,7 @@ def _main(argv: list[str]) -> None:
         raise UserError(f"task must be ball_on_plate, standing or tracking, got {args['task']!r}")
     if args.get("backend", "pybullet") not in ("pybullet", "analytic"):
         raise UserError(f"backend must be pybullet or analytic, got {args['backend']!r}")
-    flags = {k: _bool(args, k, True) for k in ("record", "compile_limits")}
+    flags = {"record": _bool(args, "record", True), "compile_limits": _bool(args, "compile_limits", False)}
     episodes = _int(args, "episodes", None)
     if episodes is not None and episodes < 1:
         raise UserError(f"episodes must be >= 1, got {episodes}")

@@ -61,8 +61,11 @@ class Feedback(Protocol):
     def reset(self, env_ids: Tensor, q: Tensor) -> None:
         """Envs `env_ids` start a new episode with the robot at rest at `q` (len(env_ids), D)."""
 
-    def step(self, q: Tensor, qd: Tensor) -> FeedbackStep:
-        """Advance every env through one decision step of setpoints `q`, `qd` (N, C, D) at the control rate."""
+    def step(self, q: Tensor, qd: Tensor, active: Tensor | None = None) -> FeedbackStep:
+        """Advance every env through one decision step of setpoints `q`, `qd` (N, C, D) at the control rate.
+
+        `active` (N,) bool: only these envs need simulating (the others' episodes are over; their values
+        may be stale). A source may simulate more (the batched torch model simulates all)."""
 
     def observe(self) -> Tensor:
         """Current observation (N, num_obs)."""
@@ -169,7 +172,7 @@ class AnalyticBall:
     def _point(self, o: Tensor, r: Tensor, local: Tensor) -> Tensor:
         return o + (r @ local.unsqueeze(-1)).squeeze(-1)
 
-    def step(self, q: Tensor, qd: Tensor) -> FeedbackStep:
+    def step(self, q: Tensor, qd: Tensor, active: Tensor | None = None) -> FeedbackStep:
         q = q[:, self.stride - 1 :: self.stride]
         c = q.shape[1]
         o, r = self.plate_pose(q)  # (N, C, 3), (N, C, 3, 3)

@@ -176,6 +176,9 @@ class PathTrackingEnv(_VecEnvBase):
         self.ep_dev_max = torch.zeros(n, **f64)
         self._obs = None
         self.last_step: dict[str, Tensor] = {}
+        #: (N,) bool or None (all): envs whose feedback is simulated. Evaluation rollouts clear the envs whose
+        #: episode has ended: their physics would be wasted work (most of an evaluation in PyBullet).
+        self.simulated: Tensor | None = None
         self.reset()
 
     # ------------------------------------------------------------------ episode management
@@ -335,7 +338,7 @@ class PathTrackingEnv(_VecEnvBase):
         failed = torch.zeros_like(moving)
         if self.feedback is not None:
             q_c, v_c, _ = interpolate_step(self.pos, self.vel, self.acc, a1, cfg.dt, self.control_steps)
-            fb = self.feedback.step(q_c, v_c)
+            fb = self.feedback.step(q_c, v_c, self.simulated)
             task = fb.values
             if fb.failed is not None:
                 failed = fb.failed.to(self.device)

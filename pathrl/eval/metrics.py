@@ -10,6 +10,8 @@ last sample averaged over TCPs.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import torch
 from torch import Tensor
 
@@ -53,31 +55,47 @@ def episode_deviation(
     sample_step: float = 0.01,
 ) -> dict[str, float]:
     """Deviation metrics of one episode. `setpoints`: (T, D) commanded positions incl. the start."""
-    q_all = setpoints.to(torch.float64)
-    q_exec, s = resample_polyline(q_all[:, path_index], sample_step)
-    s_ref = torch.clamp(start_s + s, max=end_s)
-    idx = torch.full((len(s),), path, dtype=torch.long, device=paths.device)
-    q_ref = paths.position_at(idx, s_ref.to(paths.device)).to(q_exec)
-    joint = (q_exec - q_ref).norm(dim=1)
+    return episode_deviations([setpoints], path_index, paths, [path], [start_s], [end_s], fk, sample_step)[0]
 
-    # Full-robot configurations for FK: non-path joints (e.g. legs) as executed at the nearest setpoint.
-    full_exec = _embed(q_exec, q_all, path_index)
-    full_ref = _embed(q_ref, q_all, path_index)
-    p_e, r_e = fk.tcp_poses(full_exec)
-    p_r, r_r = fk.tcp_poses(full_ref)
-    pos = (p_e - p_r).norm(dim=2) * 100.0  # (K, T) cm
-    rot = quat_angle_deg(r_e, r_r)  # (K, T)
-    return {
-        "joint_dev_mean_rad": float(joint.mean()),
-        "joint_dev_max_rad": float(joint.max()),
-        "joint_dev_final_rad": float(joint[-1]),
-        "cart_pos_dev_mean_cm": float(pos.mean()),
-        "cart_pos_dev_max_cm": float(pos.max()),
-        "cart_pos_dev_final_cm": float(pos[-1].mean()),
-        "cart_rot_dev_mean_deg": float(rot.mean()),
-        "cart_rot_dev_max_deg": float(rot.max()),
-        "cart_rot_dev_final_deg": float(rot[-1].mean()),
-    }
+
+def episode_deviations(
+    setpoints: Sequence[Tensor],
+    path_index: Tensor,
+    paths: PathSet,
+    path: Sequence[int],
+    start_s: Sequence[float],
+    end_s: Sequence[float],
+    fk: ForwardKinematics,
+    sample_step: float = 0.01,
+) -> list[dict[str, float]]:
+    """:func:`episode_deviation` of many episodes (setpoints (T_i, D) each), with one batched FK pass."""
+    joint, full_exec, full_ref = [], [], []
+    for q, p, s0, s1 in zip(setpoints, path, start_s, end_s, strict=True):
+        q_all = q.to(torch.float64)
+        q_exec, s = resample_polyline(q_all[:, path_index], sample_step)
+        s_ref = torch.clamp(s0 + s, max=s1)
+        idx = torch.full((len(s),), p, dtype=torch.long, device=paths.device)
+        q_ref = paths.position_at(idx, s_ref.to(paths.device)).to(q_exec)
+        joint.append((q_exec - q_ref).norm(dim=1))
+        # Full-robot configurations for FK: non-path joints (e.g. legs) as executed at the last setpoint.
+        full_exec.append(_embed(q_exec, q_all, path_index))
+        full_ref.append(_embed(q_ref, q_all, path_index))
+    out = []
+    for j, (p_e, r_e), (p_r, r_r) in zip(joint, fk.tcp_poses_of(full_exec), fk.tcp_poses_of(full_ref), strict=True):
+        pos = (p_e - p_r).norm(dim=2) * 100.0  # (K, T) cm
+        rot = quat_angle_deg(r_e, r_r)  # (K, T)
+        out.append({
+            "joint_dev_mean_rad": float(j.mean()),
+            "joint_dev_max_rad": float(j.max()),
+            "joint_dev_final_rad": float(j[-1]),
+            "cart_pos_dev_mean_cm": float(pos.mean()),
+            "cart_pos_dev_max_cm": float(pos.max()),
+            "cart_pos_dev_final_cm": float(pos[-1].mean()),
+            "cart_rot_dev_mean_deg": float(rot.mean()),
+            "cart_rot_dev_max_deg": float(rot.max()),
+            "cart_rot_dev_final_deg": float(rot[-1].mean()),
+        })
+    return out
 
 
 def _embed(q_path: Tensor, q_all: Tensor, path_index: Tensor) -> Tensor:

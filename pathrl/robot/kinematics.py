@@ -257,6 +257,18 @@ class ForwardKinematics:
         pos, rot = self.tcp_transforms(q)
         return pos, matrix_to_quat(rot)
 
+    def tcp_poses_of(self, qs: Sequence[Tensor], chunk: int = 32768) -> list[tuple[Tensor, Tensor]]:
+        """:meth:`tcp_poses` of several configuration batches (N_i, D) at once: one FK pass per `chunk`
+        configurations instead of one per batch (an evaluation has a thousand short episodes)."""
+        sizes = [len(q) for q in qs]
+        if not sizes:
+            return []
+        q = torch.cat([self._as_q(x) for x in qs])
+        parts = [self.tcp_poses(q[i:i + chunk]) for i in range(0, max(len(q), 1), chunk)]
+        pos = torch.cat([p for p, _ in parts])
+        quat = torch.cat([r for _, r in parts])
+        return list(zip(pos.split(sizes), quat.split(sizes), strict=True))
+
     def tcp_positions(self, q: Tensor | np.ndarray) -> Tensor:
         """TCP positions (N, T, 3) only."""
         return self.tcp_transforms(q)[0]

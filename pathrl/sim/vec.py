@@ -82,9 +82,9 @@ def _worker(conn: Connection, kind: str, robot: RobotSpec, first: int, count: in
                     scenes[i].reset(qi)
                 conn.send(_read(kind, scenes))
             elif cmd == "step":
-                q, qd = args
-                for s, qs, vs in zip(scenes, q, qd, strict=True):
-                    s.follow(qs, vs)
+                local, q, qd = args
+                for i, qs, vs in zip(local, q, qd, strict=True):
+                    scenes[i].follow(qs, vs)
                 conn.send(_read(kind, scenes))
             elif cmd == "close":
                 break
@@ -150,11 +150,14 @@ class ScenePool:
             self._send(c, ("reset", (ids[sel] - a).tolist(), qn[sel]))
         return self._gather()
 
-    def step(self, q: Tensor, qd: Tensor) -> tuple[Tensor, Tensor]:
-        """Follow setpoints (N, C, D) in every scene; readings of all envs."""
+    def step(self, q: Tensor, qd: Tensor, active: Tensor | None = None) -> tuple[Tensor, Tensor]:
+        """Follow setpoints (N, C, D) in the `active` scenes (N,) bool (default: all); readings of all envs
+        (a scene left out keeps its state, so its reading repeats)."""
         qn, vn = q.detach().cpu().numpy(), qd.detach().cpu().numpy()
+        on = np.ones(len(qn), dtype=bool) if active is None else active.detach().cpu().numpy()
         for (a, b), c in zip(self.blocks, self.conns, strict=True):
-            self._send(c, ("step", qn[a:b], vn[a:b]))
+            local = np.flatnonzero(on[a:b])
+            self._send(c, ("step", local.tolist(), qn[a:b][local], vn[a:b][local]))
         return self._gather()
 
     def close(self) -> None:
@@ -209,8 +212,8 @@ class PyBulletBall(_PooledFeedback):
         self.ok[env_ids] = on[env_ids]
         self.prev_rel[env_ids] = xy[env_ids] / self.half
 
-    def step(self, q: Tensor, qd: Tensor) -> FeedbackStep:
-        xy, on = self.pool.step(q, qd)
+    def step(self, q: Tensor, qd: Tensor, active: Tensor | None = None) -> FeedbackStep:
+        xy, on = self.pool.step(q, qd, active)
         self.prev_rel = self.xy / self.half
         was_on = self.ok.clone()
         self.xy = torch.where(self.ok.unsqueeze(1), xy, self.xy)  # a fallen ball keeps its last reading
@@ -251,8 +254,8 @@ class PyBulletStanding(_PooledFeedback):
         self.reading[env_ids] = r[env_ids]
         self.ok[env_ids] = ok[env_ids]
 
-    def step(self, q: Tensor, qd: Tensor) -> FeedbackStep:
-        r, ok = self.pool.step(q, qd)
+    def step(self, q: Tensor, qd: Tensor, active: Tensor | None = None) -> FeedbackStep:
+        r, ok = self.pool.step(q, qd, active)
         was_up = self.ok.clone()
         self.reading = r
         self.ok = self.ok & ok
