@@ -61,7 +61,8 @@ from pathrl.limits.feasible import (
     valid_acceleration_range,
 )
 from pathrl.limits.integrate import end_of_step, interpolate_step
-from pathrl.paths.pathset import PathSet
+from pathrl.limits.kernels import kernel
+from pathrl.paths.pathset import PathSet, table_position
 from pathrl.paths.segments import Segments, full_segments, sample_segments
 from pathrl.robot.model import RobotSpec
 
@@ -103,6 +104,34 @@ class TrackingEnvCfg:
 
 TERMINATION_REASONS = ("robot_stopped", "deviation", "task_failed", "time_out")
 FREE_JOINT_ACTIONS = ("centred", "posture", "linear")
+
+
+@kernel(static=True)
+def advance(pos: Tensor, vel: Tensor, acc: Tensor, a1: Tensor, path_index: Tensor, s: Tensor, end_s: Tensor,
+            path: Tensor, table: Tensor, length: Tensor, dev_weights: Tensor, dt: float, substeps: int,
+            table_step: float) -> tuple[Tensor, Tensor, Tensor, Tensor, Tensor]:
+    """Steps 2-4 of the step order for N envs: the end state and the step's progress and deviation.
+
+    pos, vel, acc, a1: (N, D) state and end acceleration; path_index: (M,) path joints; s, end_s: (N,)
+    arc length now and at the segment end; path: (N,) path ids into table (P, S, M) / length (P,);
+    dev_weights: (M,). Returns p1, v1 (N, D), moved (N,) polyline arc length of the `substeps`
+    intermediate positions (path joints), dev_max and dev_mean (N,): weighted distance of each
+    intermediate position to the reference at the same arc length from the step start (clamped at
+    the segment end), max and arc-length weighted mean (plain mean when the robot does not move).
+    """
+    q_sub, _, _ = interpolate_step(pos, vel, acc, a1, dt, substeps)
+    q_sub = q_sub.index_select(2, path_index)  # (N, S, M)
+    p1, v1 = end_of_step(pos, vel, acc, a1, dt)
+    q_prev = torch.cat([pos.index_select(1, path_index).unsqueeze(1), q_sub[:, :-1]], dim=1)
+    seg_len = (q_sub - q_prev).norm(dim=2)  # (N, S)
+    cum = seg_len.cumsum(dim=1)
+    moved = cum[:, -1]
+    s_ref = torch.minimum(s.unsqueeze(1) + cum, end_s.unsqueeze(1))
+    ref = table_position(table, length, table_step, path, s_ref)
+    dev = ((ref - q_sub) * dev_weights).norm(dim=2)  # (N, S)
+    dev_max = dev.amax(dim=1)
+    dev_mean = torch.where(moved > 1e-12, (dev * seg_len).sum(1) / moved.clamp(min=1e-12), dev.mean(dim=1))
+    return p1, v1, moved, dev_max, dev_mean
 
 
 class PathTrackingEnv(_VecEnvBase):
@@ -314,24 +343,11 @@ class PathTrackingEnv(_VecEnvBase):
             brake = braking_within(self.vel, self.acc, self.a_min, self.a_max, cfg.dt, cfg.stop_tolerance)
             a1 = torch.where(self.braking.unsqueeze(1), brake, a1)
 
-        # 2. integrate: intermediate positions (path joints) and the end state
-        q_sub, _, _ = interpolate_step(self.pos, self.vel, self.acc, a1, cfg.dt, cfg.substeps)
-        q_sub = q_sub[:, :, self.path_index]  # (N, S, M)
-        p1, v1 = end_of_step(self.pos, self.vel, self.acc, a1, cfg.dt)
-        q_prev = torch.cat([self.pos[:, self.path_index].unsqueeze(1), q_sub[:, :-1]], dim=1)
-
-        # 3. progress along the path: polyline arc length of the commanded motion
-        seg_len = (q_sub - q_prev).norm(dim=2)  # (N, S)
-        cum = seg_len.cumsum(dim=1)
-        moved = cum[:, -1]
-
-        # 4. deviation at equal arc length from the step start (reference clamped at the segment end)
-        s_ref = torch.minimum(self.s.unsqueeze(1) + cum, self.end_s.unsqueeze(1))
-        ref = self.paths.position_at(self.seg_path, s_ref)
-        dev = ((ref - q_sub) * self.dev_weights).norm(dim=2)  # (N, S)
-        dev_max = dev.amax(dim=1)
+        # 2.-4. integrate, progress along the path, deviation (one fused kernel)
+        p1, v1, moved, dev_max, dev_mean = advance(
+            self.pos, self.vel, self.acc, a1, self.path_index, self.s, self.end_s, self.seg_path, self.paths.table,
+            self.paths.length, self.dev_weights, cfg.dt, cfg.substeps, self.paths.table_step)
         moving = moved > 1e-12
-        dev_mean = torch.where(moving, (dev * seg_len).sum(1) / moved.clamp(min=1e-12), dev.mean(dim=1))
 
         # 5. feedback, reward
         task: dict[str, Tensor] = {}

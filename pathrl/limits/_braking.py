@@ -18,6 +18,12 @@ from pathrl.limits._velocity import velocity_floor
 from pathrl.limits.kernels import kernel
 
 
+def pick(t: Tensor, idx: Tensor) -> Tensor:
+    """``t[idx]`` for a flat tensor and long indices: ``index_select``, whose dispatch costs a third of
+    advanced indexing (3 vs 9 us here); the subsets of the limit code are small, so this adds up."""
+    return t.index_select(0, idx)
+
+
 @dataclass
 class Side:
     """Flat (M,) float64 joint states and limits, seen from one side (limit above)."""
@@ -31,8 +37,8 @@ class Side:
     vmax: Tensor  # velocity limit magnitude
 
     def take(self, idx: Tensor) -> Side:
-        """The elements at ``idx``."""
-        return Side(*(getattr(self, f.name)[idx] for f in fields(self)))
+        """The elements at ``idx`` (long indices)."""
+        return Side(*(pick(getattr(self, f.name), idx) for f in fields(self)))
 
 
 @dataclass
@@ -194,7 +200,7 @@ def descend(fn: PeakFn, x: Tensor, s: Side, dt: float, tol: float = 1e-13, max_i
         if not bool(todo.any()):
             break
         keep = todo.nonzero().squeeze(-1)
-        idx, cur, sub = idx[keep], cur[keep], sub.take(keep)
+        idx, cur, sub = pick(idx, keep), pick(cur, keep), sub.take(keep)
     return out
 
 
@@ -255,8 +261,8 @@ def bracket_below(fn: PeakFn, hi: Tensor, s: Side, dt: float, xtol: float = 1e-7
         if not bool(open_.any()):
             break
         sel = open_.nonzero().squeeze(-1)
-        idx, s, lo, hi, r_lo, r_hi, keep_hi, keep_lo = (
-            idx[sel], s.take(sel), lo[sel], hi[sel], r_lo[sel], r_hi[sel], keep_hi[sel], keep_lo[sel])
+        s = s.take(sel)
+        idx, lo, hi, r_lo, r_hi, keep_hi, keep_lo = (pick(t, sel) for t in (idx, lo, hi, r_lo, r_hi, keep_hi, keep_lo))
         w_hi = torch.where(keep_hi, 0.5, 1.0) * r_hi
         w_lo = torch.where(keep_lo, 0.5, 1.0) * r_lo
         x = hi - w_hi * (hi - lo) / (w_hi - w_lo)
@@ -291,7 +297,7 @@ def greedy_root(s: Side, dt: float, probe: Tensor, tol: float = 1e-13) -> Tensor
             start = torch.where(x.isfinite() & (x < probe), x, probe)
     todo = (~done).nonzero().squeeze(-1)
     if todo.numel():
-        root[todo] = descend(_greedy_fn, start[todo], s.take(todo), dt, tol)
+        root[todo] = descend(_greedy_fn, pick(start, todo), s.take(todo), dt, tol)
     return root
 
 
@@ -307,23 +313,23 @@ def greedy_bound(s: Side, dt: float, probe: Tensor, settle: float,
     idx = (greedy_peak(probe, s, dt).value > s.pmax).nonzero().squeeze(-1)
     sub = s.take(idx)
     if idx.numel() == 0:
-        empty = probe[idx]
+        empty = pick(probe, idx)
         return idx, empty, empty, greedy_peak(empty, sub, dt)
-    root = greedy_root(sub, dt, probe[idx])
+    root = greedy_root(sub, dt, pick(probe, idx))
     peak = greedy_peak(root, sub, dt)
     safe = root.clone()
-    check = aware[idx].nonzero().squeeze(-1)
+    check = pick(aware, idx).nonzero().squeeze(-1)
     if check.numel():
         sc = sub.take(check)
-        lifted = velocity_aware_peak(root[check], sc, dt, _take_peak(peak, check), settle) > sc.pmax + 1e-13
+        lifted = velocity_aware_peak(pick(root, check), sc, dt, _take_peak(peak, check), settle) > sc.pmax + 1e-13
         jdx = check[lifted]
         if jdx.numel():
-            safe[jdx] = bracket_below(_aware_fn(settle), root[jdx], sub.take(jdx), dt)
+            safe[jdx] = bracket_below(_aware_fn(settle), pick(root, jdx), sub.take(jdx), dt)
     return idx, root, safe, peak
 
 
 def _take_peak(peak: Peak, idx: Tensor) -> Peak:
-    return Peak(*(getattr(peak, f.name)[idx] for f in fields(peak)))
+    return Peak(*(pick(getattr(peak, f.name), idx) for f in fields(peak)))
 
 
 @kernel

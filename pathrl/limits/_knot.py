@@ -12,7 +12,7 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
-from pathrl.limits._braking import Peak, Side, hold_root
+from pathrl.limits._braking import Peak, Side, hold_root, pick
 from pathrl.limits.kernels import kernel
 
 
@@ -29,7 +29,7 @@ def knot_stop_bound(s: Side, dt: float, peak: Peak) -> Tensor:
     use = ((peak.time > dt + 1e-8) & (peak.phase > 0)).nonzero().squeeze(-1)
     if use.numel() == 0:
         return out
-    s, m, phase, time = s.take(use), peak.ramp[use], peak.phase[use], peak.time[use]
+    s, m, phase, time = s.take(use), pick(peak.ramp, use), pick(peak.phase, use), pick(peak.time, use)
     time = torch.where(phase == 2, _hold_hypothesis_time(s, dt, m), time)
     stop = torch.ceil(time / dt).clamp_min(2.0)
     lowest = (stop - torch.floor(s.amax / (s.jmax * dt)) - 1.0).clamp_min(1.0)
@@ -47,7 +47,7 @@ def knot_stop_bound(s: Side, dt: float, peak: Peak) -> Tensor:
             turn = first - back
             idx = (applies & best.isnan() & (turn >= last)).nonzero().squeeze(-1)
             if idx.numel():
-                best[idx] = _solve(s.take(idx), dt, stop[idx], turn[idx], ramp[idx])
+                best[idx] = _solve(s.take(idx), dt, pick(stop, idx), pick(turn, idx), pick(ramp, idx))
     out[use] = torch.where(best.isnan(), float("inf"), best)
     return out
 

@@ -35,7 +35,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from pathrl.limits._braking import Side, greedy_bound, in_step_bound, reach_top
+from pathrl.limits._braking import Side, greedy_bound, in_step_bound, pick, reach_top
 from pathrl.limits._knot import knot_stop_bound
 from pathrl.limits._velocity import velocity_bound, velocity_emergency, velocity_floor
 from pathrl.limits.kernels import kernel
@@ -180,8 +180,8 @@ def _velocity_side(v0: Tensor, a0: Tensor, vmax: Tensor, amax: Tensor, jmax: Ten
     idx = (c > skip_below).reshape(-1).nonzero().squeeze(-1)
     if idx.numel():
         joint = idx % v0.shape[-1]
-        vs, as_ = v0.reshape(-1)[idx], a0.reshape(-1)[idx]
-        lim = (vmax[joint], amax[joint], jmax[joint])
+        vs, as_ = pick(v0.reshape(-1), idx), pick(a0.reshape(-1), idx)
+        lim = (pick(vmax, joint), pick(amax, joint), pick(jmax, joint))
         bound.view(-1)[idx] = velocity_bound(vs, as_, *lim, dt, SETTLE_FACTOR)
         urgent.view(-1)[idx] = velocity_emergency(vs, as_, lim[0], lim[1], dt)
     bound = torch.where(urgent.flip(0), amax, bound)  # the other side must brake: klimits leaves +acc here
@@ -206,15 +206,16 @@ def _position_side(p0: Tensor, v0: Tensor, a0: Tensor, pmax: Tensor, limits: Joi
         return safe, knot
     joint = near % shape[-1]
     side = near // (shape[-1] * shape[-2])
-    s = Side(*(t.reshape(-1)[near] for t in (p0, v0, a0)), pmax[side, 0, joint], amax[joint], jmax[joint],
-             vmax[joint])
-    probe = cap.reshape(-1)[near] + KNOT_SLACK * s.amax
+    s = Side(*(pick(t.reshape(-1), near) for t in (p0, v0, a0)), pmax[side, 0, joint],
+             *(pick(t, joint) for t in (amax, jmax, vmax)))
+    probe = pick(cap.reshape(-1), near) + KNOT_SLACK * s.amax
     keep = (reach_top(s.p, s.v, s.a, s.amax, s.jmax, dt, probe) >= s.pmax - 1e-9).nonzero().squeeze(-1)
     if keep.numel() == 0:
         return safe, knot
-    sf, kn = _position_subset(s.take(keep), dt, probe[keep], stop_at_knot)
-    safe.view(-1)[near[keep]] = sf
-    knot.view(-1)[near[keep]] = kn
+    sf, kn = _position_subset(s.take(keep), dt, pick(probe, keep), stop_at_knot)
+    at = pick(near, keep)
+    safe.view(-1).index_copy_(0, at, sf)
+    knot.view(-1).index_copy_(0, at, kn)
     return safe, knot
 
 

@@ -60,12 +60,17 @@ def _batch_size(args: tuple) -> int:
     return 0
 
 
-def kernel(fn: F) -> F:
+def kernel(fn: F | None = None, *, static: bool = False) -> F | Callable[[F], F]:
     """Mark a pure elementwise function; compiled on first use while :func:`set_compiled` is on.
 
     Batches of 0 or 1 elements run eagerly: dynamic shapes specialize those sizes, and a recompile in
-    the middle of a run would cost more than it saves.
+    the middle of a run would cost more than it saves. ``static=True`` (``@kernel(static=True)``) compiles
+    for fixed shapes, once per input shape (up to dynamo's cache limit, then eagerly): for the kernels
+    that always see the whole batch, where it generates much faster code than dynamic shapes (the fused
+    env step, iiwa7 4096 envs: 2.8 ms static vs 8.0 ms dynamic vs 5.7 ms eager).
     """
+    if fn is None:
+        return functools.partial(kernel, static=static)
 
     @functools.wraps(fn)
     def call(*args):
@@ -73,7 +78,7 @@ def kernel(fn: F) -> F:
             return fn(*args)
         compiled_fn = _compiled.get(fn)
         if compiled_fn is None:
-            compiled_fn = _compiled[fn] = torch.compile(fn, dynamic=True)
+            compiled_fn = _compiled[fn] = torch.compile(fn, dynamic=not static)
         return compiled_fn(*args)
 
     return call  # type: ignore[return-value]

@@ -68,20 +68,7 @@ class PathSet:
 
     def position_at(self, idx: Tensor, s: Tensor) -> Tensor:
         """Reference positions of paths `idx` (N,) at arc lengths `s` (N, ...), clamped to [0, L]. -> (N, ..., M)."""
-        shape = s.shape
-        s2 = s.reshape(shape[0], -1).to(self.table.dtype)
-        x = (s2 / self.table_step).clamp(min=0.0)
-        last = (self.length[idx] / self.table_step).to(self.table.dtype).unsqueeze(1)
-        x = torch.minimum(x, last)
-        n_s = self.table.shape[1]
-        i0 = x.floor().long().clamp(max=n_s - 2)
-        w = (x - i0).unsqueeze(-1)
-        m = self.table.shape[-1]
-        flat = self.table.reshape(-1, m)
-        base = ((idx * n_s).unsqueeze(1) + i0).reshape(-1)  # rows of the flattened table
-        p0 = flat.index_select(0, base).view(*i0.shape, m)
-        p1 = flat.index_select(0, base + 1).view(*i0.shape, m)
-        return (p0 + w * (p1 - p0)).reshape(*shape, m)
+        return table_position(self.table, self.length, self.table_step, idx, s)
 
     def knot_index_at(self, idx: Tensor, s: Tensor) -> Tensor:
         """Index of the last knot with arc length <= s, for paths `idx` (N,) at `s` (N,). -> (N,) long."""
@@ -120,6 +107,24 @@ class PathSet:
             length=self.length[ii],
             table=self.table[ii],
         )
+
+
+def table_position(table: Tensor, length: Tensor, table_step: float, idx: Tensor, s: Tensor) -> Tensor:
+    """:meth:`PathSet.position_at` as a pure function of the path table (P, S, M) and lengths (P,)."""
+    shape = s.shape
+    s2 = s.reshape(shape[0], -1).to(table.dtype)
+    x = (s2 / table_step).clamp(min=0.0)
+    last = (length.index_select(0, idx) / table_step).to(table.dtype).unsqueeze(1)
+    x = torch.minimum(x, last)
+    n_s = table.shape[1]
+    i0 = x.floor().long().clamp(max=n_s - 2)
+    w = (x - i0).unsqueeze(-1)
+    m = table.shape[-1]
+    flat = table.reshape(-1, m)
+    base = ((idx * n_s).unsqueeze(1) + i0).reshape(-1)  # rows of the flattened table
+    p0 = flat.index_select(0, base).view(*i0.shape, m)
+    p1 = flat.index_select(0, base + 1).view(*i0.shape, m)
+    return (p0 + w * (p1 - p0)).reshape(*shape, m)
 
 
 def build_pathset(
