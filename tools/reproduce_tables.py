@@ -148,8 +148,8 @@ def build_plan(args: argparse.Namespace, profile: Profile, lay: Layout) -> Plan:
             trained.setdefault(e.model, e)
         for model, e in trained.items():
             plan.add("prepare", f"train {model}", lambda model=model, e=e: train_and_ship(model, e, profile, lay, logs))
-    # Longest first so that the concurrent phase ends with both lanes busy: simulated (PyBullet) evaluations,
-    # then TOPP-RA, then the kinematic evaluations.
+    # The simulated (PyBullet) evaluations, the longest steps, first: the concurrent phase then ends with
+    # short steps on every lane.
     for e in sorted(evals, key=lambda e: not e.task):
         plan.add("evaluate", f"evaluate {e.id}", lambda e=e: evaluate(e, profile, lay, args.reuse, logs))
     toppra_workers = 1 if args.jobs > 1 else 2
@@ -160,7 +160,6 @@ def build_plan(args: argparse.Namespace, profile: Profile, lay: Layout) -> Plan:
         for key, robot, split in REALTIME:
             plan.add("timing", f"real time {key}", lambda key=key, robot=robot, split=split: realtime(
                 key, robot, split, profile, lay, args.reuse, logs))
-    plan.steps.sort(key=lambda s: PHASES.index(s.phase))  # stable: keeps the order within a phase
     return plan
 
 

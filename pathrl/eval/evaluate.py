@@ -252,12 +252,13 @@ def write_episodes_mcap(path: Path, robot: RobotSpec, paths, records: list[Episo
         "jerk_limits": [[-v, v] for v in robot.jerk_limits.tolist()],
         "urdf": str(robot.urdf), "tcp_links": [t.link for t in robot.tcps],
     }, 0)
+    path_index = torch.as_tensor(robot.path_index)
     refs = []  # reference samples per episode: arc length (200,), path joints (200, M), full robot (200, D)
     for r in records:
         s = torch.linspace(r.start_s, r.end_s, 200, dtype=torch.float64)
         q_ref = paths.position_at(torch.full((200,), r.path, dtype=torch.long), s)
         full = r.pos[-1].expand(200, -1).clone()
-        full[:, torch.as_tensor(robot.path_index)] = q_ref
+        full[:, path_index] = q_ref
         refs.append((s, q_ref, full))
     tcp_refs = fk.tcp_poses_of([full for _, _, full in refs])
     tcps = fk.tcp_poses_of([r.pos for r in records])
@@ -268,7 +269,7 @@ def write_episodes_mcap(path: Path, robot: RobotSpec, paths, records: list[Episo
                                     "position": q_ref, "tcp_position": tcp_ref}, t_ns)
         dt = r.extra["dt"]
         pos, vel, acc, tcp_p, tcp_q = (x.tolist() for x in (r.pos, r.vel, r.acc, tcp_p, tcp_q))
-        series = {n: np.asarray(v, dtype=float).tolist() for n, v in (r.extra.get("task_series") or {}).items()}
+        series = {n: v.to(torch.float64).tolist() for n, v in (r.extra.get("task_series") or {}).items()}
         for k in range(len(pos)):
             tk = t_ns + int(round(k * dt * 1e9))
             w.write("/eval/joint_state", {"episode": r.episode, "t": k * dt, "position": pos[k],

@@ -72,7 +72,24 @@ def _rollout_batch(env: PathTrackingEnv, policy: Policy, plan: Segments, ids: Te
     max_steps = int(math.ceil(float(env.budget[:k].max()))) + 1
     env.simulated = active.clone()  # the feedback of ended episodes is not simulated
     try:
-        _run_batch(env, policy, active, done_step, term, states, series, max_steps, k)
+        for t in range(max_steps):
+            with torch.inference_mode():
+                actions = policy(env.get_observations())
+            _, _, dones, _ = env.step(actions)
+            states.append((env.pos.clone(), env.vel.clone(), env.acc.clone()))
+            if env.feedback is not None:
+                series.append({key[5:]: v.clone() for key, v in env.last_step.items() if key.startswith("task/")})
+            newly = dones & active & (done_step < 0)
+            if bool(newly.any()):
+                done_step[newly] = t + 1
+                info = env.last_step
+                for i in newly.nonzero().squeeze(1).tolist():
+                    term[i] = ("robot_stopped" if bool(info["stopped"][i]) else
+                               "deviation" if bool(info["dev_terminated"][i]) else
+                               "task_failed" if bool(info["task_failed"][i]) else "time_out")
+                env.simulated = active & (done_step < 0)
+            if bool((done_step[:k] >= 0).all()):
+                break
     finally:
         env.simulated = None
     pos = torch.stack([s[0] for s in states], 1)  # (N, T+1, D)
@@ -103,26 +120,3 @@ def _rollout_batch(env: PathTrackingEnv, policy: Policy, plan: Segments, ids: Te
                    "task": {key: float(v[-1]) for key, v in task_series.items()}},
         ))
     return out
-
-
-def _run_batch(env: PathTrackingEnv, policy: Policy, active: Tensor, done_step: Tensor, term: list[str],
-               states: list, series: list, max_steps: int, k: int) -> None:
-    """Step the batch until its first `k` episodes have ended; fills `done_step`, `term`, `states`, `series`."""
-    for t in range(max_steps):
-        with torch.inference_mode():
-            actions = policy(env.get_observations())
-        _, _, dones, _ = env.step(actions)
-        states.append((env.pos.clone(), env.vel.clone(), env.acc.clone()))
-        if env.feedback is not None:
-            series.append({key[5:]: v.clone() for key, v in env.last_step.items() if key.startswith("task/")})
-        newly = dones & active & (done_step < 0)
-        if bool(newly.any()):
-            done_step[newly] = t + 1
-            info = env.last_step
-            for i in newly.nonzero().squeeze(1).tolist():
-                term[i] = ("robot_stopped" if bool(info["stopped"][i]) else
-                           "deviation" if bool(info["dev_terminated"][i]) else
-                           "task_failed" if bool(info["task_failed"][i]) else "time_out")
-            env.simulated = active & (done_step < 0)
-        if bool((done_step[:k] >= 0).all()):
-            break
