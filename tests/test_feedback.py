@@ -265,3 +265,61 @@ def test_warm_start_onto_more_joints_keeps_the_policy_and_holds_the_new_joints()
         joint_rows(["b", "z"], ["a", "b", "c"])
     with pytest.raises(WarmStartError, match="do not line up"):
         input_columns(joint_rows(["b", "c"], ["a", "b", "c"]), 3, 11, 12)
+
+
+class _SlidingPlate:
+    """Stand-in forward kinematics: the plate sits at x = q[0] (m), y = q[1], level, rotated by q[2] about z."""
+
+    def tcp_transforms(self, q: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        pos = torch.zeros(len(q), 1, 3, dtype=q.dtype)
+        pos[:, 0, :2] = q[:, :2]
+        c, s = torch.cos(q[:, 2]), torch.sin(q[:, 2])
+        rot = torch.zeros(len(q), 1, 3, 3, dtype=q.dtype)
+        rot[:, 0, 0, 0], rot[:, 0, 0, 1], rot[:, 0, 1, 0], rot[:, 0, 1, 1] = c, -s, s, c
+        rot[:, 0, 2, 2] = 1.0
+        return pos, rot
+
+
+def test_plate_imu_by_hand(iiwa):
+    """Level plate accelerating at 2 m/s^2 along world x: in-plane specific force -2/g along x (rotated into
+    the plate frame), no tilt; a plate tilted by 5 deg at rest reads sin(5 deg) twice."""
+    from pathrl.envs.feedback import PlateIMU
+
+    imu = PlateIMU(iiwa, 2, 240.0, fk=_SlidingPlate())
+    t = torch.arange(24, dtype=torch.float64) / 240.0
+    q = torch.zeros(2, 24, 3, dtype=torch.float64)
+    q[:, :, 0] = 0.5 * 2.0 * t**2  # x = a t^2 / 2
+    q[1, :, 2] = math.pi / 2  # the second plate is turned by 90 deg: world x is its -y
+    reading = imu.step(q)
+    g = 9.81
+    assert reading[0].tolist() == pytest.approx([-2.0 / g, 0.0, 0.0, 0.0], abs=1e-9)
+    assert reading[1].tolist() == pytest.approx([0.0, 2.0 / g, 0.0, 0.0], abs=1e-9)
+
+    real = PlateIMU(iiwa, 1, 240.0)
+    tilted = LEVEL.clone()
+    tilted[5] += math.radians(5.0)
+    real.reset(torch.tensor([0]), LEVEL[None])
+    assert real.reading.abs().max().item() < 1e-9  # level plate at rest reads 0
+    r = real.step(tilted.expand(1, 24, 7).clone())[0]
+    assert float(r[:2].norm()) == pytest.approx(math.sin(math.radians(5.0)), abs=1e-9)
+    assert r[:2].tolist() == pytest.approx(r[2:].tolist(), abs=1e-9)  # at rest: force = gravity
+
+
+def test_plate_imu_joins_the_ball_state_in_both_backends(iiwa):
+    """task.imu adds the same 4 values to the analytic and the PyBullet ball observation."""
+    from pathrl.sim.vec import PyBulletBall
+
+    q = LEVEL.clone()
+    q[5] += 0.1
+    qs = q.expand(2, 24, 7).clone()
+    model = AnalyticBall(iiwa, 2, seed=0, imu=True)
+    pyb = PyBulletBall(iiwa, 2, seed=0, workers=1, imu=True)
+    try:
+        assert model.num_obs == pyb.num_obs == 8
+        for fb in (model, pyb):
+            fb.reset(torch.arange(2), LEVEL.expand(2, 7).clone())
+        a, b = model.step(qs, torch.zeros_like(qs)).obs, pyb.step(qs, torch.zeros_like(qs)).obs
+        assert torch.allclose(a[:, 4:], b[:, 4:], rtol=0.0, atol=1e-12)
+        assert float(a[0, 6:].norm()) == pytest.approx(math.sin(0.1), abs=1e-9)
+    finally:
+        pyb.close()

@@ -94,3 +94,30 @@ def test_compiled_env_advance_equals_eager(compiled_kernels) -> None:
         assert compiled[2].shape == (n,) and bool((compiled[2] > 0).all())
         for e, c in zip(eager, compiled, strict=True):
             torch.testing.assert_close(c, e, rtol=1e-12, atol=1e-14)
+
+
+@pytest.mark.parametrize("relative,end_obs", [(True, True), (False, False)])
+def test_compiled_env_observation_equals_eager(compiled_kernels, relative: bool, end_obs: bool) -> None:
+    """The env's observation kernel (static shapes) gives the eager state, window ends included."""
+    import numpy as np
+
+    from pathrl.envs.tracking import observe_state
+    from pathrl.paths.pathset import build_pathset
+
+    rng = np.random.default_rng(1)
+    paths = build_pathset([np.cumsum(rng.uniform(-0.1, 0.1, (8 + i, 3)), axis=0) for i in range(4)], list("abcd"))
+    g = torch.Generator().manual_seed(3)
+    n = 48
+    pos, vel, acc = (torch.randn(n, 4, generator=g, dtype=torch.float64) * 0.3 for _ in range(3))
+    path = torch.randint(4, (n,), generator=g)
+    s = torch.rand(n, generator=g, dtype=torch.float64) * paths.length[path]
+    end_knot = paths.num_knots[path] - 1 - torch.randint(3, (n,), generator=g)
+    end_s = paths.knot_s[path, end_knot]
+    lim = torch.tensor([[-1.0, 1.0]] * 4, dtype=torch.float64)
+    ones = torch.ones(4, dtype=torch.float64)
+    args = (pos, vel, acc, lim, ones, 2.0 * ones, torch.tensor([0, 1, 3]), paths.knots, paths.knot_s, path, s,
+            end_knot, paths.position_at(path, end_s), end_s, 5, 1.2, 0.3, relative, end_obs)
+    eager, compiled = _both(observe_state, *args)
+    assert bool(eager[2].any()) and not bool(eager[2].all())  # some windows reach the end knot
+    for e, c in zip(eager, compiled, strict=True):
+        torch.testing.assert_close(c, e, rtol=1e-12, atol=1e-14)

@@ -125,6 +125,7 @@ class TaskCfg:
     workers: int = 2  # pybullet worker processes
     observe: bool = True  # sensor values in the state
     fail_terminates: bool = True  # the task's failure (ball off the plate) ends the episode
+    imu: bool = False  # ball_on_plate: the plate's inertial sensor reading joins the state (feedback.PlateIMU)
 
 
 @dataclass

@@ -74,9 +74,57 @@ class Feedback(Protocol):
         """Release processes / clients (no-op for torch models)."""
 
 
-def ball_observation(prev_rel: Tensor, rel: Tensor) -> Tensor:
-    """The authors' ball state: previous then current (x, y) relative to the usable half-size; (N, 4)."""
-    return torch.cat([prev_rel, rel], dim=1)
+def ball_observation(prev_rel: Tensor, rel: Tensor, imu: PlateIMU | None = None) -> Tensor:
+    """The authors' ball state: previous then current (x, y) relative to the usable half-size; (N, 4).
+
+    With a plate `imu` its reading follows; (N, 8)."""
+    parts = [prev_rel, rel] + ([imu.reading.to(rel.device)] if imu is not None else [])
+    return torch.cat(parts, dim=1)
+
+
+class PlateIMU:
+    """An inertial sensor on the plate, read from the control-rate setpoints (both backends read it alike).
+
+    Reading at the end of a decision step, (N, 4), in units of g: the in-plane specific force
+    ``R^T (g - a)`` (x, y: what drives a ball rolling on the plate, 7/5 of its acceleration relative to
+    the plate) at the step's last-but-one setpoint (central second difference of the last three plate
+    centres, 1/control_rate apart), then the in-plane gravity ``R^T g`` (x, y: the plate's tilt) at the
+    last setpoint. A level plate at rest reads 0. An accelerometer and an attitude estimate on the plate
+    would report the same; here they follow from forward kinematics of the commanded setpoints, the
+    way the authors computed the Cartesian state.
+    """
+
+    num_obs = 4
+
+    def __init__(self, robot: RobotSpec, num_envs: int, control_rate: float = 240.0,
+                 device: str | torch.device = "cpu", fk: ForwardKinematics | None = None):
+        self.device = torch.device(device)
+        self.fk = fk if fk is not None else ForwardKinematics(robot, device=self.device)
+        self.h = 1.0 / control_rate
+        self.reading = torch.zeros(num_envs, 4, dtype=torch.float64, device=self.device)
+        self.g = torch.tensor([0.0, 0.0, -GRAVITY], dtype=torch.float64, device=self.device)
+
+    def _plate(self, q: Tensor) -> tuple[Tensor, Tensor]:
+        shape = q.shape[:-1]
+        pos, rot = self.fk.tcp_transforms(q.reshape(-1, q.shape[-1]))
+        return pos[:, 0].reshape(*shape, 3), rot[:, 0].reshape(*shape, 3, 3)
+
+    def reset(self, env_ids: Tensor, q: Tensor) -> None:
+        """Envs `env_ids` at rest at `q` (len(env_ids), D): specific force = gravity."""
+        if len(env_ids) == 0:
+            return
+        _, rot = self._plate(q)
+        grav = (self.g.expand(len(env_ids), 3).unsqueeze(1) @ rot).squeeze(1)[:, :2] / GRAVITY
+        self.reading[env_ids] = torch.cat([grav, grav], dim=1)
+
+    def step(self, q: Tensor) -> Tensor:
+        """Read the sensor after a step of setpoints `q` (N, C >= 3, D); returns the reading (N, 4)."""
+        o, rot = self._plate(q[:, -3:])
+        acc = (o[:, 2] - 2.0 * o[:, 1] + o[:, 0]) / self.h**2
+        force = ((self.g - acc).unsqueeze(1) @ rot[:, 1]).squeeze(1)[:, :2] / GRAVITY
+        grav = (self.g.expand(len(q), 3).unsqueeze(1) @ rot[:, 2]).squeeze(1)[:, :2] / GRAVITY
+        self.reading = torch.cat([force, grav], dim=1)
+        return self.reading
 
 
 def sample_ball_radius(n: int, generator: torch.Generator, device: torch.device) -> Tensor:
@@ -125,11 +173,13 @@ class AnalyticBall:
     ok_value = "ball_on_plate"
 
     def __init__(self, robot: RobotSpec, num_envs: int, control_rate: float = 240.0, seed: int = 0,
-                 device: str | torch.device = "cpu", model_rate: float = 40.0):
+                 device: str | torch.device = "cpu", model_rate: float = 40.0, imu: bool = False):
         if len(robot.tcps) != 1:
             raise ValueError(f"ball on plate needs a robot with one TCP, {robot.name} has {len(robot.tcps)}")
         self.device = torch.device(device)
         self.fk = ForwardKinematics(robot, device=self.device)
+        self.imu = PlateIMU(robot, num_envs, control_rate, self.device, self.fk) if imu else None
+        self.num_obs = 4 + (PlateIMU.num_obs if imu else 0)
         self.n = num_envs
         self.stride = max(1, int(round(control_rate / model_rate)))  # every stride-th setpoint drives the model
         self.dtc = self.stride / control_rate
@@ -168,11 +218,15 @@ class AnalyticBall:
         self.hist_o[env_ids] = o.unsqueeze(1).expand(k, 2, 3)
         self.hist_r[env_ids] = r.unsqueeze(1).expand(k, 2, 3, 3)
         self.prev_rel[env_ids] = self.xy[env_ids] / self.half
+        if self.imu is not None:
+            self.imu.reset(env_ids, q)
 
     def _point(self, o: Tensor, r: Tensor, local: Tensor) -> Tensor:
         return o + (r @ local.unsqueeze(-1)).squeeze(-1)
 
     def step(self, q: Tensor, qd: Tensor, active: Tensor | None = None) -> FeedbackStep:
+        if self.imu is not None:
+            self.imu.step(q)
         q = q[:, self.stride - 1 :: self.stride]
         c = q.shape[1]
         o, r = self.plate_pose(q)  # (N, C, 3), (N, C, 3, 3)
@@ -208,7 +262,7 @@ class AnalyticBall:
         return {"ball_dist": rel.norm(dim=1), "ball_on_plate": self.on.to(torch.float64)}
 
     def observe(self) -> Tensor:
-        return ball_observation(self.prev_rel, self.xy / self.half).clamp(-1.0, 1.0)
+        return ball_observation(self.prev_rel, self.xy / self.half, self.imu).clamp(-1.0, 1.0)
 
     def close(self) -> None:
         pass

@@ -134,6 +134,43 @@ def advance(pos: Tensor, vel: Tensor, acc: Tensor, a1: Tensor, path_index: Tenso
     return p1, v1, moved, dev_max, dev_mean
 
 
+@kernel(static=True)
+def observe_state(pos: Tensor, vel: Tensor, acc: Tensor, pos_lim: Tensor, vel_lim: Tensor, acc_lim: Tensor,
+                  path_index: Tensor, knots: Tensor, knot_s: Tensor, path: Tensor, s: Tensor, end_knot: Tensor,
+                  end_q: Tensor, end_s: Tensor, n_state: int, horizon: float, knot_gap: float, relative: bool,
+                  end_obs: bool) -> tuple[Tensor, Tensor, Tensor]:
+    """The tracking state of N envs (the layout of the module docstring, before clipping), float64 (N, k).
+
+    pos, vel, acc: (N, D); pos_lim (D, 2), vel_lim, acc_lim (D,); knots (P, K, M) / knot_s (P, K) of the
+    path bank, padded; path, end_knot: (N,) long; s, end_s: (N,) arc length; end_q: (N, M) end knot.
+    Also returns l_obs (N,): arc length of the window's last knot, and close_to_end (N,): the window
+    reaches the end knot.
+    """
+    lo, hi = pos_lim[:, 0], pos_lim[:, 1]
+    pos_n = 2.0 * (pos - lo) / (hi - lo) - 1.0
+    ks_path = knot_s.index_select(0, path)  # (N, K)
+    i0 = (torch.searchsorted(ks_path, s.unsqueeze(1).contiguous(), right=True).squeeze(1) - 1).clamp(min=0)
+    i0 = torch.minimum(i0, end_knot)
+    ii = torch.minimum(i0.unsqueeze(1) + torch.arange(n_state, device=s.device), end_knot.unsqueeze(1))  # (N, n)
+    win = knots[path.unsqueeze(1), ii]  # (N, n, M)
+    ks = ks_path.gather(1, ii)
+    q = pos.index_select(1, path_index)
+    if relative:  # translation invariant: the direction and distance to each knot
+        knots_n = ((win - q.unsqueeze(1)) / horizon).flatten(1)
+    else:
+        plo, phi = lo.index_select(0, path_index), hi.index_select(0, path_index)
+        knots_n = (2.0 * (win - plo) / (phi - plo) - 1.0).flatten(1)
+    d0 = ks[:, :1]
+    inside = 2.0 * (s.unsqueeze(1) - d0) / knot_gap - 1.0
+    ahead = 2.0 * (ks - d0) / horizon - 1.0  # [:, -1] is the window length
+    parts = [pos_n, vel / vel_lim, acc / acc_lim, knots_n, inside, ahead[:, -1:], ahead[:, 1:]]
+    if end_obs:
+        to_end = (end_q - q) / knot_gap
+        left = 2.0 * ((end_s - s) / knot_gap).clamp(0.0, 1.0) - 1.0
+        parts += [to_end, left.unsqueeze(1)]
+    return torch.cat(parts, dim=1), ks[:, -1], ks[:, -1] >= end_s
+
+
 class PathTrackingEnv(_VecEnvBase):
     """N robots tracking reference path segments in parallel."""
 
@@ -289,29 +326,12 @@ class PathTrackingEnv(_VecEnvBase):
 
     def _observe(self) -> Tensor:
         lim = self.limits
-        lo, hi = lim.pos[:, 0], lim.pos[:, 1]
-        pos_n = 2.0 * (self.pos - lo) / (hi - lo) - 1.0
-        vel_n = self.vel / lim.vel
-        acc_n = self.acc / lim.acc
-        knots, ks = self.paths.window(self.seg_path, self.s, self.end_knot, self.cfg.n_state)
-        plo, phi = lo[self.path_index], hi[self.path_index]
-        if self.cfg.knot_obs == "relative":  # translation invariant: the direction and distance to each knot
-            knots_n = ((knots - self.pos[:, self.path_index].unsqueeze(1)) / self.horizon).flatten(1)
-        else:
-            knots_n = (2.0 * (knots - plo) / (phi - plo) - 1.0).flatten(1)
-        d0 = ks[:, :1]
-        self.l_obs = ks[:, -1]
-        self.close_to_end = ks[:, -1] >= self.end_s
-        inside = 2.0 * (self.s.unsqueeze(1) - d0) / self.knot_gap - 1.0
-        ahead = 2.0 * (ks - d0) / self.horizon - 1.0  # [:, -1] is the window length
-        parts = [pos_n, vel_n, acc_n, knots_n, inside, ahead[:, -1:], ahead[:, 1:]]
-        if self.cfg.end_obs:
-            to_end = (self.end_q - self.pos[:, self.path_index]) / self.knot_gap
-            left = 2.0 * ((self.end_s - self.s) / self.knot_gap).clamp(0.0, 1.0) - 1.0
-            parts += [to_end, left.unsqueeze(1)]
+        obs, self.l_obs, self.close_to_end = observe_state(
+            self.pos, self.vel, self.acc, lim.pos, lim.vel, lim.acc, self.path_index, self.paths.knots,
+            self.paths.knot_s, self.seg_path, self.s, self.end_knot, self.end_q, self.end_s, self.cfg.n_state,
+            self.horizon, self.knot_gap, self.cfg.knot_obs == "relative", self.cfg.end_obs)
         if self.feedback is not None and self.cfg.feedback_obs:
-            parts.append(self.feedback.observe().to(self.pos.dtype))
-        obs = torch.cat(parts, dim=1)
+            obs = torch.cat([obs, self.feedback.observe().to(obs.dtype)], dim=1)
         return obs.clamp(-1.0, 1.0).to(torch.float32)
 
     @property

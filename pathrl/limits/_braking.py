@@ -8,6 +8,7 @@ the decision steps ("knots"); the step about to be taken ends with acceleration 
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 from dataclasses import dataclass, fields
 
@@ -186,22 +187,23 @@ def descend(fn: PeakFn, x: Tensor, s: Side, dt: float, tol: float = 1e-13, max_i
     """Newton's method for ``fn(x).value == pmax``, starting right of the root; (M,) -> (M,).
 
     For a convex increasing peak the iterates decrease monotonically onto the root. Iterations stop
-    at ``|peak - pmax| <= tol`` (m); converged elements drop out.
+    at ``|peak - pmax| <= tol`` (m). Converged elements are re-evaluated at the same point and stay put,
+    so the whole subset is iterated (one fused kernel call per iteration, no re-indexing).
     """
-    out = x.clone()
-    idx = torch.arange(x.numel(), device=x.device)
-    cur, sub = x.clone(), s
+    cur = x.clone()
     for _ in range(max_iter):
-        value, slope = fn(cur, sub, dt)
-        r = value - sub.pmax
-        todo = r.abs() > tol
-        cur = cur - torch.where(todo, r / slope, 0.0)
-        out[idx] = cur
+        cur, todo = _newton_step(fn, cur, s, dt, tol)
         if not bool(todo.any()):
             break
-        keep = todo.nonzero().squeeze(-1)
-        idx, cur, sub = pick(idx, keep), pick(cur, keep), sub.take(keep)
-    return out
+    return cur
+
+
+@kernel
+def _newton_step(fn: PeakFn, x: Tensor, s: Side, dt: float, tol: float) -> tuple[Tensor, Tensor]:
+    value, slope = fn(x, s, dt)
+    r = value - s.pmax
+    todo = r.abs() > tol
+    return x - torch.where(todo, r / slope, 0.0), todo
 
 
 @kernel
@@ -237,7 +239,7 @@ def bracket_below(fn: PeakFn, hi: Tensor, s: Side, dt: float, xtol: float = 1e-7
     shrinks the bracket by regula falsi (Illinois variant) with a bisection fallback; returns the safe
     end once the bracket is narrower than ``xtol * (1 + |x|)`` (physical units of ``x``) or after
     ``max_iter`` shrinking steps (the rare elements where the peak jumps then get a slightly lower,
-    still safe bound).
+    still safe bound). Elements that are done are carried along unchanged (one fused kernel per step).
     """
     value, slope = fn(hi, s, dt)
     r_hi = value - s.pmax
@@ -248,32 +250,41 @@ def bracket_below(fn: PeakFn, hi: Tensor, s: Side, dt: float, xtol: float = 1e-7
         bad = r_lo > 0.0
         if not bool(bad.any()):
             break
-        step = torch.where(bad, 2.0 * step, step)
-        hi, r_hi = torch.where(bad, lo, hi), torch.where(bad, r_lo, r_hi)
-        lo = torch.where(bad, hi - step, lo)
-        r_lo = torch.where(bad, fn(lo, s, dt)[0] - s.pmax, r_lo)
-    out = lo.clone()
-    idx = torch.arange(lo.numel(), device=lo.device)
+        lo, hi, r_lo, r_hi, step = _widen(fn, bad, lo, hi, r_lo, r_hi, step, s, dt)
     keep_hi = torch.zeros_like(lo, dtype=torch.bool)  # Illinois: which end was kept last time
     keep_lo = torch.zeros_like(keep_hi)
     for _ in range(max_iter):
         open_ = (hi - lo) > xtol * (1.0 + lo.abs())
         if not bool(open_.any()):
             break
-        sel = open_.nonzero().squeeze(-1)
-        s = s.take(sel)
-        idx, lo, hi, r_lo, r_hi, keep_hi, keep_lo = (pick(t, sel) for t in (idx, lo, hi, r_lo, r_hi, keep_hi, keep_lo))
-        w_hi = torch.where(keep_hi, 0.5, 1.0) * r_hi
-        w_lo = torch.where(keep_lo, 0.5, 1.0) * r_lo
-        x = hi - w_hi * (hi - lo) / (w_hi - w_lo)
-        x = torch.where((x > lo) & (x < hi), x, 0.5 * (lo + hi))
-        r = fn(x, s, dt)[0] - s.pmax
-        up = r > 0.0
-        hi, r_hi = torch.where(up, x, hi), torch.where(up, r, r_hi)
-        lo, r_lo = torch.where(up, lo, x), torch.where(up, r_lo, r)
-        keep_hi, keep_lo = ~up, up
-        out[idx] = lo
-    return out
+        lo, hi, r_lo, r_hi, keep_hi, keep_lo = _illinois(fn, open_, lo, hi, r_lo, r_hi, keep_hi, keep_lo, s, dt)
+    return lo
+
+
+@kernel
+def _widen(fn: PeakFn, bad: Tensor, lo: Tensor, hi: Tensor, r_lo: Tensor, r_hi: Tensor, step: Tensor, s: Side,
+           dt: float) -> tuple[Tensor, Tensor, Tensor, Tensor, Tensor]:
+    """One doubling step down of :func:`bracket_below` for the elements still above the limit (``bad``)."""
+    step = torch.where(bad, 2.0 * step, step)
+    hi, r_hi = torch.where(bad, lo, hi), torch.where(bad, r_lo, r_hi)
+    lo = torch.where(bad, hi - step, lo)
+    r_lo = torch.where(bad, fn(lo, s, dt)[0] - s.pmax, r_lo)
+    return lo, hi, r_lo, r_hi, step
+
+
+@kernel
+def _illinois(fn: PeakFn, open_: Tensor, lo: Tensor, hi: Tensor, r_lo: Tensor, r_hi: Tensor, keep_hi: Tensor,
+              keep_lo: Tensor, s: Side, dt: float) -> tuple[Tensor, Tensor, Tensor, Tensor, Tensor, Tensor]:
+    """One regula-falsi (Illinois) step of :func:`bracket_below` on the still open brackets (``open_``)."""
+    w_hi = torch.where(keep_hi, 0.5, 1.0) * r_hi
+    w_lo = torch.where(keep_lo, 0.5, 1.0) * r_lo
+    x = hi - w_hi * (hi - lo) / (w_hi - w_lo)
+    x = torch.where((x > lo) & (x < hi), x, 0.5 * (lo + hi))
+    r = fn(x, s, dt)[0] - s.pmax
+    up = open_ & (r > 0.0)
+    down = open_ & ~(r > 0.0)
+    return (torch.where(down, x, lo), torch.where(up, x, hi), torch.where(down, r, r_lo), torch.where(up, r, r_hi),
+            torch.where(open_, ~up, keep_hi), torch.where(open_, up, keep_lo))
 
 
 def greedy_root(s: Side, dt: float, probe: Tensor, tol: float = 1e-13) -> Tensor:
@@ -344,7 +355,9 @@ def _aware_value(x: Tensor, s: Side, dt: float, settle: float) -> tuple[Tensor, 
     return velocity_aware_peak(x, s, dt, peak, settle), peak.slope
 
 
+@functools.lru_cache(maxsize=None)
 def _aware_fn(settle: float) -> PeakFn:
+    """The velocity-aware peak as a PeakFn (one object per ``settle``: compiled steps specialize on it)."""
     def fn(x: Tensor, s: Side, dt: float) -> tuple[Tensor, Tensor]:
         return _aware_value(x, s, dt, settle)
 

@@ -199,8 +199,7 @@ def _position_side(p0: Tensor, v0: Tensor, a0: Tensor, pmax: Tensor, limits: Joi
     shape = p0.shape
     safe = torch.full(shape, float("inf"), dtype=p0.dtype, device=p0.device)
     knot = safe.clone()
-    zero = torch.zeros_like(vmax)
-    radius = reach_top(zero, vmax, amax, amax, jmax, dt, (1.0 + KNOT_SLACK) * amax)
+    radius = _reach_radius(limits, dt)
     near = ((pmax - p0) <= radius).reshape(-1).nonzero().squeeze(-1)
     if near.numel() == 0:
         return safe, knot
@@ -217,6 +216,15 @@ def _position_side(p0: Tensor, v0: Tensor, a0: Tensor, pmax: Tensor, limits: Joi
     safe.view(-1).index_copy_(0, at, sf)
     knot.view(-1).index_copy_(0, at, kn)
     return safe, knot
+
+
+def _reach_radius(limits: JointLimits, dt: float) -> Tensor:
+    """(D,) farthest a joint at full speed can still travel towards a limit (cached per limits and ``dt``)."""
+    cache = limits.__dict__.setdefault("_reach_radius", {})  # frozen dataclass: a plain per-instance cache
+    if dt not in cache:
+        zero = torch.zeros_like(limits.vel)
+        cache[dt] = reach_top(zero, limits.vel, limits.acc, limits.acc, limits.jerk, dt, (1.0 + KNOT_SLACK) * limits.acc)
+    return cache[dt]
 
 
 def _position_subset(s: Side, dt: float, probe: Tensor, stop_at_knot: bool) -> tuple[Tensor, Tensor]:
@@ -240,7 +248,7 @@ def _position_subset(s: Side, dt: float, probe: Tensor, stop_at_knot: bool) -> t
     return safe_all, torch.where(outside, safe_all, torch.minimum(knot, safe_all))
 
 
-@kernel
+@kernel(static=True)
 def _combine(jerk_hi: Tensor, vel_hi: Tensor, pos_hi: Tensor, knot_hi: Tensor
              ) -> tuple[Tensor, Tensor, Tensor]:
     """Intersect the (2, N, D) per-side upper bounds; returns (lo, hi, overlap) in joint coordinates.

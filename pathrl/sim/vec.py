@@ -20,7 +20,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from pathrl.envs.feedback import USABLE_HALF, FeedbackStep, ball_observation
+from pathrl.envs.feedback import USABLE_HALF, FeedbackStep, PlateIMU, ball_observation
 from pathrl.robot.model import RobotSpec
 
 #: Free-standing robot: observation scales (the authors' normalization) and the fall threshold.
@@ -198,8 +198,10 @@ class PyBulletBall(_PooledFeedback):
     ok_value = "ball_on_plate"
 
     def __init__(self, robot: RobotSpec, num_envs: int, control_rate: float = 240.0, seed: int = 0,
-                 workers: int = 2):
+                 workers: int = 2, imu: bool = False):
         super().__init__(robot, num_envs, control_rate, seed, workers)
+        self.imu = PlateIMU(robot, num_envs, control_rate) if imu else None
+        self.num_obs = 4 + (PlateIMU.num_obs if imu else 0)
         self.half = torch.tensor(USABLE_HALF, dtype=torch.float64)
         self.xy = torch.zeros(num_envs, 2, dtype=torch.float64)
         self.prev_rel = torch.zeros(num_envs, 2, dtype=torch.float64)
@@ -211,9 +213,13 @@ class PyBulletBall(_PooledFeedback):
         self.xy[env_ids] = xy[env_ids]
         self.ok[env_ids] = on[env_ids]
         self.prev_rel[env_ids] = xy[env_ids] / self.half
+        if self.imu is not None:
+            self.imu.reset(env_ids, q)
 
     def step(self, q: Tensor, qd: Tensor, active: Tensor | None = None) -> FeedbackStep:
         xy, on = self.pool.step(q, qd, active)
+        if self.imu is not None:
+            self.imu.step(q)
         self.prev_rel = self.xy / self.half
         was_on = self.ok.clone()
         self.xy = torch.where(self.ok.unsqueeze(1), xy, self.xy)  # a fallen ball keeps its last reading
@@ -224,7 +230,7 @@ class PyBulletBall(_PooledFeedback):
         return {"ball_dist": (self.xy / self.half).norm(dim=1), "ball_on_plate": self.ok.to(torch.float64)}
 
     def observe(self) -> Tensor:
-        return ball_observation(self.prev_rel, self.xy / self.half).clamp(-1.0, 1.0)
+        return ball_observation(self.prev_rel, self.xy / self.half, self.imu).clamp(-1.0, 1.0)
 
 
 class PyBulletStanding(_PooledFeedback):

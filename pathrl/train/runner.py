@@ -27,7 +27,7 @@ CHECKPOINT_RE = re.compile(r"^model_(\d+)\.pt$")
 
 #: Config keys added after runs were saved, with the value that reproduces what those runs did: a saved config
 #: without the key resumes under a config holding this value (and is evaluated with it, `env_cfg_from`).
-ADDED_KEYS: dict[str, Any] = {"env.free_joint_actions": "linear", "env.posture_omega": 3.0}
+ADDED_KEYS: dict[str, Any] = {"env.free_joint_actions": "linear", "env.posture_omega": 3.0, "task.imu": False}
 
 
 def env_cfg_from(cfg: dict[str, Any], num_envs: int | None = None, seed: int | None = None,
@@ -62,7 +62,7 @@ def env_cfg_from(cfg: dict[str, Any], num_envs: int | None = None, seed: int | N
 
 #: The task of configs saved before tasks existed (plain tracking).
 NO_TASK = {"name": "tracking", "feedback": None, "backend": "analytic", "workers": 2, "observe": True,
-           "fail_terminates": True}
+           "fail_terminates": True, "imu": False}
 FEEDBACK_BACKENDS = ("analytic", "pybullet")
 FEEDBACKS = ("ball_on_plate", "standing")
 
@@ -80,6 +80,8 @@ def make_feedback(cfg: dict[str, Any], robot: RobotSpec, num_envs: int, seed: in
         raise ValueError(f"task.feedback: unknown {t['feedback']!r}; known: {list(FEEDBACKS)}")
     backend = backend or t["backend"]
     rate = float(cfg["env"]["control_rate"])
+    if t["imu"] and t["feedback"] != "ball_on_plate":
+        raise ValueError(f"task.imu: the plate sensor exists only for task ball_on_plate, not {t['feedback']!r}")
     if t["feedback"] == "standing":
         if backend != "pybullet":
             raise ValueError("task standing: no analytic model of a standing robot exists; use task.backend=pybullet")
@@ -91,11 +93,11 @@ def make_feedback(cfg: dict[str, Any], robot: RobotSpec, num_envs: int, seed: in
     if backend == "analytic":
         from pathrl.envs.feedback import AnalyticBall
 
-        return AnalyticBall(robot, num_envs, rate, seed=seed, device=str(cfg.get("device", "cpu")))
+        return AnalyticBall(robot, num_envs, rate, seed=seed, device=str(cfg.get("device", "cpu")), imu=bool(t["imu"]))
     if backend == "pybullet":
         from pathrl.sim.vec import PyBulletBall
 
-        return PyBulletBall(robot, num_envs, rate, seed=seed, workers=int(t["workers"]))
+        return PyBulletBall(robot, num_envs, rate, seed=seed, workers=int(t["workers"]), imu=bool(t["imu"]))
     raise ValueError(f"task.backend: expected one of {list(FEEDBACK_BACKENDS)}, got {backend!r}")
 
 
