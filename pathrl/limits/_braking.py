@@ -355,7 +355,7 @@ def _aware_value(x: Tensor, s: Side, dt: float, settle: float) -> tuple[Tensor, 
     return velocity_aware_peak(x, s, dt, peak, settle), peak.slope
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _aware_fn(settle: float) -> PeakFn:
     """The velocity-aware peak as a PeakFn (one object per ``settle``: compiled steps specialize on it)."""
     def fn(x: Tensor, s: Side, dt: float) -> tuple[Tensor, Tensor]:

@@ -223,7 +223,8 @@ def _reach_radius(limits: JointLimits, dt: float) -> Tensor:
     cache = limits.__dict__.setdefault("_reach_radius", {})  # frozen dataclass: a plain per-instance cache
     if dt not in cache:
         zero = torch.zeros_like(limits.vel)
-        cache[dt] = reach_top(zero, limits.vel, limits.acc, limits.acc, limits.jerk, dt, (1.0 + KNOT_SLACK) * limits.acc)
+        amax = limits.acc
+        cache[dt] = reach_top(zero, limits.vel, amax, amax, limits.jerk, dt, (1.0 + KNOT_SLACK) * amax)
     return cache[dt]
 
 
