@@ -199,3 +199,15 @@ def test_posture_pulls_biased_free_joints_back():
 def test_free_joint_mapping_is_validated():
     with pytest.raises(ValueError, match="free_joint_actions"):
         make_env("armar4_legs", num_envs=2, free_joint_actions="tanh")
+
+
+def test_passed_knots_follow_a_search_over_the_path():
+    """The env's running knot index (advanced as the robot progresses, reset with the segment) equals a
+    search of each env's knot row, through resets and a path replaced mid-episode."""
+    env, _ = make_env(num_envs=64)
+    gen = torch.Generator().manual_seed(1)
+    for k in range(60):
+        env.step(torch.rand(64, env.num_actions, generator=gen) * 2 - 1)
+        if k == 20:
+            env.replace_path(torch.tensor([3, 5]), torch.tensor([1, 2]), torch.tensor([0.4, 1.1], dtype=torch.float64))
+        assert torch.equal(env.knot_i, env.paths.knot_index_at(env.seg_path, env.s))

@@ -115,7 +115,8 @@ def test_compiled_env_observation_equals_eager(compiled_kernels, relative: bool,
     end_s = paths.knot_s[path, end_knot]
     lim = torch.tensor([[-1.0, 1.0]] * 4, dtype=torch.float64)
     ones = torch.ones(4, dtype=torch.float64)
-    args = (pos, vel, acc, lim, ones, 2.0 * ones, torch.tensor([0, 1, 3]), paths.knots, paths.knot_s, path, s,
+    knot_i = paths.knot_index_at(path, s)
+    args = (pos, vel, acc, lim, ones, 2.0 * ones, torch.tensor([0, 1, 3]), paths.knots, paths.knot_s, path, knot_i, s,
             end_knot, paths.position_at(path, end_s), end_s, 5, 1.2, 0.3, relative, end_obs)
     eager, compiled = _both(observe_state, *args)
     assert bool(eager[2].any()) and not bool(eager[2].all())  # some windows reach the end knot

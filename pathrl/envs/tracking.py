@@ -136,24 +136,22 @@ def advance(pos: Tensor, vel: Tensor, acc: Tensor, a1: Tensor, path_index: Tenso
 
 @kernel(static=True)
 def observe_state(pos: Tensor, vel: Tensor, acc: Tensor, pos_lim: Tensor, vel_lim: Tensor, acc_lim: Tensor,
-                  path_index: Tensor, knots: Tensor, knot_s: Tensor, path: Tensor, s: Tensor, end_knot: Tensor,
-                  end_q: Tensor, end_s: Tensor, n_state: int, horizon: float, knot_gap: float, relative: bool,
-                  end_obs: bool) -> tuple[Tensor, Tensor, Tensor]:
+                  path_index: Tensor, knots: Tensor, knot_s: Tensor, path: Tensor, knot_i: Tensor, s: Tensor,
+                  end_knot: Tensor, end_q: Tensor, end_s: Tensor, n_state: int, horizon: float, knot_gap: float,
+                  relative: bool, end_obs: bool) -> tuple[Tensor, Tensor, Tensor]:
     """The tracking state of N envs (the layout of the module docstring, before clipping), float64 (N, k).
 
     pos, vel, acc: (N, D); pos_lim (D, 2), vel_lim, acc_lim (D,); knots (P, K, M) / knot_s (P, K) of the
-    path bank, padded; path, end_knot: (N,) long; s, end_s: (N,) arc length; end_q: (N, M) end knot.
-    Also returns l_obs (N,): arc length of the window's last knot, and close_to_end (N,): the window
-    reaches the end knot.
+    path bank, padded; path, knot_i (last knot at or behind s), end_knot: (N,) long; s, end_s: (N,) arc
+    length; end_q: (N, M) end knot. Also returns l_obs (N,): arc length of the window's last knot, and
+    close_to_end (N,): the window reaches the end knot.
     """
     lo, hi = pos_lim[:, 0], pos_lim[:, 1]
     pos_n = 2.0 * (pos - lo) / (hi - lo) - 1.0
-    ks_path = knot_s.index_select(0, path)  # (N, K)
-    i0 = (torch.searchsorted(ks_path, s.unsqueeze(1).contiguous(), right=True).squeeze(1) - 1).clamp(min=0)
-    i0 = torch.minimum(i0, end_knot)
+    i0 = torch.minimum(knot_i, end_knot)
     ii = torch.minimum(i0.unsqueeze(1) + torch.arange(n_state, device=s.device), end_knot.unsqueeze(1))  # (N, n)
     win = knots[path.unsqueeze(1), ii]  # (N, n, M)
-    ks = ks_path.gather(1, ii)
+    ks = knot_s[path.unsqueeze(1), ii]
     q = pos.index_select(1, path_index)
     if relative:  # translation invariant: the direction and distance to each knot
         knots_n = ((win - q.unsqueeze(1)) / horizon).flatten(1)
@@ -227,6 +225,7 @@ class PathTrackingEnv(_VecEnvBase):
         self.a_max = torch.zeros(n, d, **f64)
         self.seg_path = torch.zeros(n, dtype=torch.long, device=self.device)
         self.s = torch.zeros(n, **f64)
+        self.knot_i = torch.zeros(n, dtype=torch.long, device=self.device)  # last knot at or behind s
         self.start_s = torch.zeros(n, **f64)
         self.end_s = torch.zeros(n, **f64)
         self.end_knot = torch.zeros(n, dtype=torch.long, device=self.device)
@@ -261,6 +260,7 @@ class PathTrackingEnv(_VecEnvBase):
         self.seg_path[env_ids] = seg.path
         self.start_s[env_ids] = seg.start_s
         self.s[env_ids] = seg.start_s
+        self.knot_i[env_ids] = self.paths.knot_index_at(seg.path, seg.start_s)
         self.end_s[env_ids] = seg.end_s
         self.end_knot[env_ids] = seg.end_knot
         self.end_q[env_ids] = self.paths.position_at(seg.path, seg.end_s)
@@ -303,6 +303,7 @@ class PathTrackingEnv(_VecEnvBase):
         """
         self.seg_path[env_ids] = path
         self.s[env_ids] = s
+        self.knot_i[env_ids] = self.paths.knot_index_at(path, self.s[env_ids])
         self.start_s[env_ids] = s
         ek = self.paths.num_knots[path] - 1 if end_knot is None else end_knot
         self.end_knot[env_ids] = ek
@@ -310,6 +311,17 @@ class PathTrackingEnv(_VecEnvBase):
         self.end_q[env_ids] = self.paths.position_at(path, self.end_s[env_ids])
         self.braking[env_ids] = False
         self._update_window()
+
+    def _pass_knots(self) -> None:
+        """Move ``knot_i`` past the knots the step's progress reached (s only grows between resets): the
+        result equals ``paths.knot_index_at(seg_path, s)`` without searching each env's whole knot row."""
+        knot_s, last = self.paths.knot_s, self.paths.knot_s.shape[1] - 1
+        while True:
+            nxt = (self.knot_i + 1).clamp(max=last)
+            passed = (knot_s[self.seg_path, nxt] <= self.s) & (self.knot_i < last)
+            if not bool(passed.any()):
+                return
+            self.knot_i = self.knot_i + passed
 
     def set_paths(self, paths: PathSet) -> None:
         """Swap the path bank (e.g. an evaluation split). Envs keep running until they are reset."""
@@ -328,7 +340,8 @@ class PathTrackingEnv(_VecEnvBase):
         lim = self.limits
         obs, self.l_obs, self.close_to_end = observe_state(
             self.pos, self.vel, self.acc, lim.pos, lim.vel, lim.acc, self.path_index, self.paths.knots,
-            self.paths.knot_s, self.seg_path, self.s, self.end_knot, self.end_q, self.end_s, self.cfg.n_state,
+            self.paths.knot_s, self.seg_path, self.knot_i, self.s,
+            self.end_knot, self.end_q, self.end_s, self.cfg.n_state,
             self.horizon, self.knot_gap, self.cfg.knot_obs == "relative", self.cfg.end_obs)
         if self.feedback is not None and self.cfg.feedback_obs:
             obs = torch.cat([obs, self.feedback.observe().to(obs.dtype)], dim=1)
@@ -397,6 +410,7 @@ class PathTrackingEnv(_VecEnvBase):
         # state update
         self.pos, self.vel, self.acc = p1, v1, a1
         self.s = torch.minimum(self.s + moved, self.end_s)
+        self._pass_knots()
         self.episode_length_buf += 1
         self.ep_dev_sum += dev_mean
         self.ep_dev_max = torch.maximum(self.ep_dev_max, dev_max)
