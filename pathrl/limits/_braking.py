@@ -299,17 +299,24 @@ def greedy_root(s: Side, dt: float, probe: Tensor, tol: float = 1e-13) -> Tensor
     start = probe.clone()
     most = int(torch.floor((probe + s.amax) / (s.jmax * dt)).clamp_min(0.0).max().item())
     for m in range(most + 1):
-        x, v_h = hold_root(s, dt, torch.full_like(probe, float(m)))
-        fits = (v_h > 0.0) & (torch.floor((x + s.amax) / (s.jmax * dt)).clamp_min(0.0) == m) & (x <= probe)
-        found = ~done & fits
-        root = torch.where(found, x, root)
-        done |= found
-        if m == 0:
-            start = torch.where(x.isfinite() & (x < probe), x, probe)
+        root, done, start = _hold_candidate(s, dt, probe, float(m), root, done, start)
     todo = (~done).nonzero().squeeze(-1)
     if todo.numel():
         root[todo] = descend(_greedy_fn, pick(start, todo), s.take(todo), dt, tol)
     return root
+
+
+@kernel
+def _hold_candidate(s: Side, dt: float, probe: Tensor, m: float, root: Tensor, done: Tensor, start: Tensor
+                    ) -> tuple[Tensor, Tensor, Tensor]:
+    """One ramp structure ``m`` of :func:`greedy_root`: its hold-phase root where consistent and not found
+    before; for ``m == 0`` also Newton's start."""
+    x, v_h = hold_root(s, dt, torch.full_like(probe, m))
+    fits = (v_h > 0.0) & (torch.floor((x + s.amax) / (s.jmax * dt)).clamp_min(0.0) == m) & (x <= probe)
+    found = ~done & fits
+    if m == 0.0:
+        start = torch.where(x.isfinite() & (x < probe), x, probe)
+    return torch.where(found, x, root), done | found, start
 
 
 def greedy_bound(s: Side, dt: float, probe: Tensor, settle: float,

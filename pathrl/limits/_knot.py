@@ -44,12 +44,18 @@ def knot_stop_bound(s: Side, dt: float, peak: Peak) -> Tensor:
     for ramp, first, last, applies in plans:
         last = torch.maximum(last, lowest)
         for back in range(int((first - last).max().item()) + 1):
-            turn = first - back
-            idx = (applies & best.isnan() & (turn >= last)).nonzero().squeeze(-1)
-            if idx.numel():
-                best[idx] = _solve(s.take(idx), dt, pick(stop, idx), pick(turn, idx), pick(ramp, idx))
+            best = _try_plan(best, applies, s, dt, stop, first - back, ramp, last)
     out[use] = torch.where(best.isnan(), float("inf"), best)
     return out
+
+
+@kernel
+def _try_plan(best: Tensor, applies: Tensor, s: Side, dt: float, stop: Tensor, turn: Tensor, ramp: Tensor,
+              last: Tensor) -> Tensor:
+    """``best`` with :func:`_solve`'s ``x`` filled in where no earlier profile was admissible and this one
+    applies (turning knot not below ``last``); evaluated on all elements, kept where it counts."""
+    x = _solve(s, dt, stop, turn, ramp)
+    return torch.where(applies & best.isnan() & (turn >= last), x, best)
 
 
 @kernel
