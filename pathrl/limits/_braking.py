@@ -188,14 +188,22 @@ def descend(fn: PeakFn, x: Tensor, s: Side, dt: float, tol: float = 1e-13, max_i
 
     For a convex increasing peak the iterates decrease monotonically onto the root. Iterations stop
     at ``|peak - pmax| <= tol`` (m). Converged elements are re-evaluated at the same point and stay put,
-    so the whole subset is iterated (one fused kernel call per iteration, no re-indexing).
+    so the subset is iterated as a whole (one fused kernel call per iteration) until fewer than half of
+    its elements are left, which are then taken out and iterated alone.
     """
-    cur = x.clone()
+    out = x.clone()
+    idx = torch.arange(x.numel(), device=x.device)
+    cur, sub = x.clone(), s
     for _ in range(max_iter):
-        cur, todo = _newton_step(fn, cur, s, dt, tol)
-        if not bool(todo.any()):
+        cur, todo = _newton_step(fn, cur, sub, dt, tol)
+        left = int(todo.sum())
+        if left == 0:
             break
-    return cur
+        if 2 * left < todo.numel():  # few left: iterate only those from now on
+            out.index_copy_(0, idx, cur)
+            keep = todo.nonzero().squeeze(-1)
+            idx, cur, sub = pick(idx, keep), pick(cur, keep), sub.take(keep)
+    return out.index_copy_(0, idx, cur)
 
 
 @kernel
@@ -239,7 +247,8 @@ def bracket_below(fn: PeakFn, hi: Tensor, s: Side, dt: float, xtol: float = 1e-7
     shrinks the bracket by regula falsi (Illinois variant) with a bisection fallback; returns the safe
     end once the bracket is narrower than ``xtol * (1 + |x|)`` (physical units of ``x``) or after
     ``max_iter`` shrinking steps (the rare elements where the peak jumps then get a slightly lower,
-    still safe bound). Elements that are done are carried along unchanged (one fused kernel per step).
+    still safe bound). Closed brackets are carried along unchanged (one fused kernel per step) until fewer
+    than half are open; those are then taken out.
     """
     value, slope = fn(hi, s, dt)
     r_hi = value - s.pmax
@@ -253,12 +262,21 @@ def bracket_below(fn: PeakFn, hi: Tensor, s: Side, dt: float, xtol: float = 1e-7
         lo, hi, r_lo, r_hi, step = _widen(fn, bad, lo, hi, r_lo, r_hi, step, s, dt)
     keep_hi = torch.zeros_like(lo, dtype=torch.bool)  # Illinois: which end was kept last time
     keep_lo = torch.zeros_like(keep_hi)
+    out = lo.clone()
+    idx = torch.arange(lo.numel(), device=lo.device)
     for _ in range(max_iter):
         open_ = (hi - lo) > xtol * (1.0 + lo.abs())
-        if not bool(open_.any()):
+        left = int(open_.sum())
+        if left == 0:
             break
+        if 2 * left < open_.numel():  # few brackets open: shrink only those from now on
+            out.index_copy_(0, idx, lo)
+            sel = open_.nonzero().squeeze(-1)
+            s = s.take(sel)
+            idx, lo, hi, r_lo, r_hi, keep_hi, keep_lo, open_ = (
+                pick(t, sel) for t in (idx, lo, hi, r_lo, r_hi, keep_hi, keep_lo, open_))
         lo, hi, r_lo, r_hi, keep_hi, keep_lo = _illinois(fn, open_, lo, hi, r_lo, r_hi, keep_hi, keep_lo, s, dt)
-    return lo
+    return out.index_copy_(0, idx, lo)
 
 
 @kernel
