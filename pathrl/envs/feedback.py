@@ -82,6 +82,14 @@ def ball_observation(prev_rel: Tensor, rel: Tensor, imu: PlateIMU | None = None)
     return torch.cat(parts, dim=1)
 
 
+def plate_pose(fk: ForwardKinematics, q: Tensor) -> tuple[Tensor, Tensor]:
+    """Plate centre (surface mid-plane) positions (..., 3) and rotations (..., 3, 3) for setpoints (..., D)."""
+    shape = q.shape[:-1]
+    pos, rot = fk.tcp_transforms(q.reshape(-1, q.shape[-1]))
+    pos = pos[:, 0] + rot[:, 0, :, 2] * (PLATE_SIZE[2] / 2)  # the plate's centre sits half its thickness up
+    return pos.reshape(*shape, 3), rot[:, 0].reshape(*shape, 3, 3)
+
+
 class PlateIMU:
     """An inertial sensor on the plate, read from the control-rate setpoints (both backends read it alike).
 
@@ -104,22 +112,17 @@ class PlateIMU:
         self.reading = torch.zeros(num_envs, 4, dtype=torch.float64, device=self.device)
         self.g = torch.tensor([0.0, 0.0, -GRAVITY], dtype=torch.float64, device=self.device)
 
-    def _plate(self, q: Tensor) -> tuple[Tensor, Tensor]:
-        shape = q.shape[:-1]
-        pos, rot = self.fk.tcp_transforms(q.reshape(-1, q.shape[-1]))
-        return pos[:, 0].reshape(*shape, 3), rot[:, 0].reshape(*shape, 3, 3)
-
     def reset(self, env_ids: Tensor, q: Tensor) -> None:
         """Envs `env_ids` at rest at `q` (len(env_ids), D): specific force = gravity."""
         if len(env_ids) == 0:
             return
-        _, rot = self._plate(q)
+        _, rot = plate_pose(self.fk, q)
         grav = (self.g.expand(len(env_ids), 3).unsqueeze(1) @ rot).squeeze(1)[:, :2] / GRAVITY
         self.reading[env_ids] = torch.cat([grav, grav], dim=1)
 
     def step(self, q: Tensor) -> Tensor:
         """Read the sensor after a step of setpoints `q` (N, C >= 3, D); returns the reading (N, 4)."""
-        o, rot = self._plate(q[:, -3:])
+        o, rot = plate_pose(self.fk, q[:, -3:])
         acc = (o[:, 2] - 2.0 * o[:, 1] + o[:, 0]) / self.h**2
         force = ((self.g - acc).unsqueeze(1) @ rot[:, 1]).squeeze(1)[:, :2] / GRAVITY
         grav = (self.g.expand(len(q), 3).unsqueeze(1) @ rot[:, 2]).squeeze(1)[:, :2] / GRAVITY
@@ -199,11 +202,8 @@ class AnalyticBall:
         self.g = torch.tensor([0.0, 0.0, -GRAVITY], **f64)
 
     def plate_pose(self, q: Tensor) -> tuple[Tensor, Tensor]:
-        """Plate centre (surface mid-plane) positions (..., 3) and rotations (..., 3, 3) for setpoints (..., D)."""
-        shape = q.shape[:-1]
-        pos, rot = self.fk.tcp_transforms(q.reshape(-1, q.shape[-1]))
-        pos = pos[:, 0] + rot[:, 0, :, 2] * (PLATE_SIZE[2] / 2)  # the plate's centre sits half its thickness up
-        return pos.reshape(*shape, 3), rot[:, 0].reshape(*shape, 3, 3)
+        """:func:`plate_pose` of this model's robot."""
+        return plate_pose(self.fk, q)
 
     def reset(self, env_ids: Tensor, q: Tensor) -> None:
         if len(env_ids) == 0:

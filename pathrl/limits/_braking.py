@@ -300,7 +300,7 @@ def _illinois(fn: PeakFn, open_: Tensor, lo: Tensor, hi: Tensor, r_lo: Tensor, r
     x = torch.where((x > lo) & (x < hi), x, 0.5 * (lo + hi))
     r = fn(x, s, dt)[0] - s.pmax
     up = open_ & (r > 0.0)
-    down = open_ & ~(r > 0.0)
+    down = open_ & ~up
     return (torch.where(down, x, lo), torch.where(up, x, hi), torch.where(down, r, r_lo), torch.where(up, r, r_hi),
             torch.where(open_, ~up, keep_hi), torch.where(open_, up, keep_lo))
 
