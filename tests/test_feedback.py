@@ -323,3 +323,79 @@ def test_plate_imu_joins_the_ball_state_in_both_backends(iiwa):
         assert float(a[0, 6:].norm()) == pytest.approx(math.sin(0.1), abs=1e-9)
     finally:
         pyb.close()
+
+
+def test_plate_drive_by_hand(iiwa):
+    """The drive is the in-plane specific force (g): 0 for a level plate at rest or sliding at constant
+    velocity, a/g for a level plate accelerating at a, sin(tilt) for a tilted plate at rest, and 0 again
+    for a plate tilted into its acceleration by atan(a/g) (the waiter's tray)."""
+    from pathrl.envs.feedback import PlateDrive
+
+    g, a = 9.81, 2.0
+    t = torch.arange(1, 25, dtype=torch.float64) / 240.0
+    q = torch.zeros(3, 24, 3, dtype=torch.float64)
+    q[0, :, 0] = 0.7 * t  # constant velocity
+    q[1, :, 0] = 0.5 * a * t**2
+    q[2, :, 1] = 0.5 * a * t**2  # along world y, the plate turned by 30 deg: magnitude unchanged
+    q[2, :, 2] = math.radians(30.0)
+    drive = PlateDrive(iiwa, 3, 240.0, fk=_SlidingPlate())
+    start = torch.zeros(3, 3, dtype=torch.float64)
+    start[2, 2] = math.radians(30.0)
+    drive.reset(torch.arange(3), start)
+    # the first step starts from rest: its first interior instant sees the jump in velocity of env 0
+    drive.step(q)
+    q2 = q.clone()
+    q2[0, :, 0] = 0.7 * (t + 0.1)
+    q2[1:, :, :2] = (0.5 * a * (t + 0.1) ** 2)[None, :, None] * (q[1:, -1:, :2] != 0)
+    value = drive.step(q2)
+    assert value.tolist() == pytest.approx([0.0, a / g, a / g], abs=1e-9)
+
+    real = PlateDrive(iiwa, 2, 240.0)
+    tilted = LEVEL.clone()
+    tilted[5] += math.radians(5.0)
+    real.reset(torch.arange(2), torch.stack([LEVEL, tilted]))
+    value = real.step(torch.stack([LEVEL, tilted])[:, None].expand(2, 24, 7).clone())
+    assert value.tolist() == pytest.approx([0.0, math.sin(math.radians(5.0))], abs=1e-9)
+
+
+def test_waiter_tray_does_not_drive_the_ball():
+    """A plate tilted by atan(a/g) into a horizontal acceleration a feels no in-plane force."""
+    from pathrl.envs.feedback import inplane_force
+
+    a, g, h = 3.0, 9.81, 1.0 / 40.0
+    tilt = math.atan(a / g)
+    t = torch.arange(5, dtype=torch.float64) * h
+    o = torch.zeros(1, 5, 3, dtype=torch.float64)
+    o[0, :, 0] = 0.5 * a * t**2
+    c, s = math.cos(tilt), math.sin(tilt)
+    r = torch.tensor([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]], dtype=torch.float64)  # normal leans to +x
+    f = inplane_force(o, r.expand(1, 5, 3, 3), h)
+    assert f.abs().max().item() < 1e-12
+    level = inplane_force(o, torch.eye(3, dtype=torch.float64).expand(1, 5, 3, 3), h)
+    assert level[0, :, 0].tolist() == pytest.approx([-a / g] * 3, abs=1e-9)
+
+
+def test_ball_drive_is_the_same_in_both_backends(iiwa):
+    """The analytic model and the PyBullet backend report the same drive for the same setpoints, and the
+    reward term rates it: 1 at no drive, 0 beyond the threshold."""
+    from pathrl.envs.rewards import StepQuantities, ball_drive
+    from pathrl.sim.vec import PyBulletBall
+
+    t = torch.arange(1, 25, dtype=torch.float64) / 240.0
+    qs = LEVEL.expand(2, 24, 7).clone()
+    qs[1, :, 0] += 0.5 * 1.5 * t**2  # joint 1 accelerates: the plate swings round the base
+    model = AnalyticBall(iiwa, 2, seed=0)
+    pyb = PyBulletBall(iiwa, 2, seed=0, workers=1)
+    try:
+        for fb in (model, pyb):
+            fb.reset(torch.arange(2), LEVEL.expand(2, 7).clone())
+        a = model.step(qs, torch.zeros_like(qs)).values["ball_drive"]
+        b = pyb.step(qs, torch.zeros_like(qs)).values["ball_drive"]
+    finally:
+        pyb.close()
+    assert torch.allclose(a, b, rtol=0.0, atol=1e-12)
+    assert a[0].item() < 1e-9 < 0.05 < a[1].item()
+    zero = torch.zeros(2, dtype=torch.float64)
+    q = StepQuantities(zero, zero, zero, zero, zero, zero, zero.bool(),
+                       task={"ball_drive": torch.tensor([0.0, 0.05, 0.2]), "ball_on_plate": torch.tensor([1.0, 1.0, 1.0])})
+    assert ball_drive(q, threshold=0.1).tolist() == pytest.approx([1.0, 0.25, 0.0])

@@ -90,6 +90,60 @@ def plate_pose(fk: ForwardKinematics, q: Tensor) -> tuple[Tensor, Tensor]:
     return pos.reshape(*shape, 3), rot[:, 0].reshape(*shape, 3, 3)
 
 
+def inplane_force(o: Tensor, r: Tensor, h: float) -> Tensor:
+    """In-plane specific force ``R^T (g - a)`` (x, y; units of g) of plate poses ``o`` (N, T, 3), ``r``
+    (N, T, 3, 3) sampled ``h`` seconds apart, at the interior instants 1..T-2 (central second differences
+    of ``o``); (N, T-2, 2). A ball rolling on the plate accelerates relative to it by 5/7 of this (x g)."""
+    acc = (o[:, 2:] - 2.0 * o[:, 1:-1] + o[:, :-2]) / h**2
+    g = torch.tensor([0.0, 0.0, -GRAVITY], dtype=o.dtype, device=o.device)
+    return ((g - acc).unsqueeze(-2) @ r[:, 1:-1]).squeeze(-2)[..., :2] / GRAVITY
+
+
+class PlateDrive:
+    """What pushes a ball around on the plate during a decision step: the mean magnitude of the plate's
+    in-plane specific force (:func:`inplane_force`, units of g), (N,).
+
+    Zero while the plate is held level at rest, and while it is tilted into its acceleration the way a
+    waiter tilts a tray (``tan(tilt) = a / g``); a ball then keeps its place on the plate. Sampled at
+    ``model_rate`` (every ``stride``-th setpoint, the analytic ball model's rate) with the last two
+    instants of the previous step as history, from forward kinematics of the commanded setpoints (the
+    same in both backends). The reward term ``ball_drive`` reads it.
+    """
+
+    def __init__(self, robot: RobotSpec, num_envs: int, control_rate: float = 240.0, model_rate: float = 40.0,
+                 device: str | torch.device = "cpu", fk: ForwardKinematics | None = None):
+        self.device = torch.device(device)
+        self.fk = fk if fk is not None else ForwardKinematics(robot, device=self.device)
+        self.stride = max(1, int(round(control_rate / model_rate)))
+        self.h = self.stride / control_rate
+        f64 = dict(dtype=torch.float64, device=self.device)
+        self.hist_o = torch.zeros(num_envs, 2, 3, **f64)
+        self.hist_r = torch.eye(3, **f64).expand(num_envs, 2, 3, 3).clone()
+        self.value = torch.zeros(num_envs, **f64)
+
+    def reset(self, env_ids: Tensor, q: Tensor) -> None:
+        """Envs `env_ids` at rest at `q` (len(env_ids), D)."""
+        if len(env_ids) == 0:
+            return
+        o, r = plate_pose(self.fk, q)
+        self.hist_o[env_ids] = o.unsqueeze(1).expand(len(env_ids), 2, 3)
+        self.hist_r[env_ids] = r.unsqueeze(1).expand(len(env_ids), 2, 3, 3)
+        self.value[env_ids] = 0.0
+
+    def step(self, q: Tensor) -> Tensor:
+        """The drive during a step of setpoints `q` (N, C, D); returns it (N,)."""
+        o, r = plate_pose(self.fk, q[:, self.stride - 1 :: self.stride])
+        o, r = torch.cat([self.hist_o, o], dim=1), torch.cat([self.hist_r, r], dim=1)
+        self.hist_o, self.hist_r = o[:, -2:].clone(), r[:, -2:].clone()
+        self.value = mean_drive(o, r, self.h)
+        return self.value
+
+
+def mean_drive(o: Tensor, r: Tensor, h: float) -> Tensor:
+    """Mean magnitude of :func:`inplane_force` over the interior instants; (N,) in g."""
+    return inplane_force(o, r, h).norm(dim=-1).mean(dim=1)
+
+
 class PlateIMU:
     """An inertial sensor on the plate, read from the control-rate setpoints (both backends read it alike).
 
@@ -123,8 +177,7 @@ class PlateIMU:
     def step(self, q: Tensor) -> Tensor:
         """Read the sensor after a step of setpoints `q` (N, C >= 3, D); returns the reading (N, 4)."""
         o, rot = plate_pose(self.fk, q[:, -3:])
-        acc = (o[:, 2] - 2.0 * o[:, 1] + o[:, 0]) / self.h**2
-        force = ((self.g - acc).unsqueeze(1) @ rot[:, 1]).squeeze(1)[:, :2] / GRAVITY
+        force = inplane_force(o, rot, self.h)[:, 0]
         grav = (self.g.expand(len(q), 3).unsqueeze(1) @ rot[:, 2]).squeeze(1)[:, :2] / GRAVITY
         self.reading = torch.cat([force, grav], dim=1)
         return self.reading
@@ -172,7 +225,7 @@ class AnalyticBall:
 
     name = "ball_on_plate"
     num_obs = 4
-    value_names = ("ball_dist", "ball_on_plate")
+    value_names = ("ball_dist", "ball_on_plate", "ball_drive")
     ok_value = "ball_on_plate"
 
     def __init__(self, robot: RobotSpec, num_envs: int, control_rate: float = 240.0, seed: int = 0,
@@ -195,6 +248,7 @@ class AnalyticBall:
         self.roll_mu = torch.full((num_envs,), 3e-4, **f64)  # rolling friction coefficient (m)
         self.on = torch.ones(num_envs, dtype=torch.bool, device=self.device)
         self.prev_rel = torch.zeros(num_envs, 2, **f64)
+        self.drive = torch.zeros(num_envs, **f64)  # PlateDrive's value, from this model's plate poses
         self.hist_o = torch.zeros(num_envs, 2, 3, **f64)  # plate origin at the last two control instants
         self.hist_r = torch.eye(3, **f64).expand(num_envs, 2, 3, 3).clone()
         self.half = torch.tensor(USABLE_HALF, **f64)
@@ -218,6 +272,7 @@ class AnalyticBall:
         self.hist_o[env_ids] = o.unsqueeze(1).expand(k, 2, 3)
         self.hist_r[env_ids] = r.unsqueeze(1).expand(k, 2, 3, 3)
         self.prev_rel[env_ids] = self.xy[env_ids] / self.half
+        self.drive[env_ids] = 0.0
         if self.imu is not None:
             self.imu.reset(env_ids, q)
 
@@ -233,6 +288,7 @@ class AnalyticBall:
         o = torch.cat([self.hist_o, o], dim=1)  # instants -2, -1, 0 .. C-1 -> index k + 2
         r = torch.cat([self.hist_r, r], dim=1)
         self.prev_rel = self.xy / self.half
+        self.drive = mean_drive(o, r, self.dtc)
         was_on = self.on.clone()
         for k in range(c):
             # acceleration of the plate point under the ball at instant k-1 (central difference)
@@ -259,7 +315,7 @@ class AnalyticBall:
 
     def values(self) -> dict[str, Tensor]:
         rel = self.xy / self.half
-        return {"ball_dist": rel.norm(dim=1), "ball_on_plate": self.on.to(torch.float64)}
+        return {"ball_dist": rel.norm(dim=1), "ball_on_plate": self.on.to(torch.float64), "ball_drive": self.drive}
 
     def observe(self) -> Tensor:
         return ball_observation(self.prev_rel, self.xy / self.half, self.imu).clamp(-1.0, 1.0)

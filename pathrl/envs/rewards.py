@@ -90,6 +90,16 @@ def ball_centre(q: StepQuantities, margin: float = 0.06) -> Tensor:
     return (1.0 - (d / (1.0 - margin)).clamp(max=1.0)) ** 2 * on
 
 
+def ball_drive(q: StepQuantities, threshold: float = 0.1) -> Tensor:
+    """Ball-on-plate shaping: (1 - min(1, F / threshold))^2 while the ball is on the plate, else 0.
+
+    F = mean in-plane specific force on the plate during the step (task value ``ball_drive``, units of g,
+    :class:`pathrl.envs.feedback.PlateDrive`): what accelerates the ball relative to the plate (by 5/7 of
+    it). Rewards the waiter's way of carrying a tray, tilted into the acceleration; not in the paper.
+    """
+    return _closeness(q.task["ball_drive"], threshold) * q.task["ball_on_plate"]
+
+
 def base_tilt(q: StepQuantities, threshold: float = 0.125) -> Tensor:
     """Standing robot: (1 - min(1, tilt / threshold))^2, tilt = angle of the pelvis z axis to world z (rad)."""
     return _closeness(q.task["base_tilt"], threshold)
@@ -113,13 +123,15 @@ REWARD_TERMS: dict[str, RewardFn] = {
     "deviation_mean": deviation_mean,
     "action_saturation": action_saturation,
     "ball_centre": ball_centre,
+    "ball_drive": ball_drive,
     "base_tilt": base_tilt,
     "base_position": base_position,
     "base_orientation": base_orientation,
 }
 
 #: Feedback values (StepQuantities.task) a term reads; the env refuses terms its feedback cannot serve.
-TASK_VALUES: dict[str, tuple[str, ...]] = {"ball_centre": ("ball_dist", "ball_on_plate"), "base_tilt": ("base_tilt",),
+TASK_VALUES: dict[str, tuple[str, ...]] = {"ball_centre": ("ball_dist", "ball_on_plate"),
+                                           "ball_drive": ("ball_drive", "ball_on_plate"), "base_tilt": ("base_tilt",),
                                            "base_position": ("base_offset",),
                                            "base_orientation": ("base_orientation",)}
 

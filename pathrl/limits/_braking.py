@@ -188,14 +188,15 @@ def descend(fn: PeakFn, x: Tensor, s: Side, dt: float, tol: float = 1e-13, max_i
 
     For a convex increasing peak the iterates decrease monotonically onto the root. Iterations stop
     at ``|peak - pmax| <= tol`` (m). Converged elements are re-evaluated at the same point and stay put,
-    so the subset is iterated as a whole (one fused kernel call per iteration) until fewer than half of
-    its elements are left, which are then taken out and iterated alone.
+    so the subset is iterated as a whole (one fused kernel call per UNROLL iterations) until fewer than
+    half of its elements are left, which are then taken out and iterated alone. ``max_iter`` is rounded
+    down to a multiple of UNROLL.
     """
     out = x.clone()
     idx = torch.arange(x.numel(), device=x.device)
     cur, sub = x.clone(), s
-    for _ in range(max_iter):
-        cur, todo = _newton_step(fn, cur, sub, dt, tol)
+    for _ in range(max_iter // UNROLL):
+        cur, todo = _newton_steps(fn, cur, sub, dt, tol)
         left = int(todo.sum())
         if left == 0:
             break
@@ -206,12 +207,22 @@ def descend(fn: PeakFn, x: Tensor, s: Side, dt: float, tol: float = 1e-13, max_i
     return out.index_copy_(0, idx, cur)
 
 
+#: Iterations of the root loops per compiled call (:func:`descend`, :func:`bracket_below`). An element whose
+#: iteration has ended is carried through the rest of a block unchanged, so results do not depend on it;
+#: fewer calls save their dispatch (the loops often run on a few dozen elements).
+UNROLL = 4
+
+
 @kernel
-def _newton_step(fn: PeakFn, x: Tensor, s: Side, dt: float, tol: float) -> tuple[Tensor, Tensor]:
-    value, slope = fn(x, s, dt)
-    r = value - s.pmax
-    todo = r.abs() > tol
-    return x - torch.where(todo, r / slope, 0.0), todo
+def _newton_steps(fn: PeakFn, x: Tensor, s: Side, dt: float, tol: float) -> tuple[Tensor, Tensor]:
+    """UNROLL Newton steps; returns the iterate and whether the last step still moved it."""
+    todo = torch.ones_like(x, dtype=torch.bool)
+    for _ in range(UNROLL):
+        value, slope = fn(x, s, dt)
+        r = value - s.pmax
+        todo = r.abs() > tol
+        x = x - torch.where(todo, r / slope, 0.0)
+    return x, todo
 
 
 @kernel
@@ -247,24 +258,24 @@ def bracket_below(fn: PeakFn, hi: Tensor, s: Side, dt: float, xtol: float = 1e-7
     shrinks the bracket by regula falsi (Illinois variant) with a bisection fallback; returns the safe
     end once the bracket is narrower than ``xtol * (1 + |x|)`` (physical units of ``x``) or after
     ``max_iter`` shrinking steps (the rare elements where the peak jumps then get a slightly lower,
-    still safe bound). Closed brackets are carried along unchanged (one fused kernel per step) until fewer
-    than half are open; those are then taken out.
+    still safe bound). Closed brackets are carried along unchanged (one fused kernel per UNROLL steps)
+    until fewer than half are open; those are then taken out. ``max_iter`` is rounded down to a multiple
+    of UNROLL.
     """
     value, slope = fn(hi, s, dt)
     r_hi = value - s.pmax
     step = r_hi / slope
     lo = hi - step
     r_lo = fn(lo, s, dt)[0] - s.pmax
-    for _ in range(max_iter):
-        bad = r_lo > 0.0
-        if not bool(bad.any()):
+    for _ in range(max_iter // UNROLL):
+        if not bool((r_lo > 0.0).any()):
             break
-        lo, hi, r_lo, r_hi, step = _widen(fn, bad, lo, hi, r_lo, r_hi, step, s, dt)
+        lo, hi, r_lo, r_hi, step = _widen(fn, lo, hi, r_lo, r_hi, step, s, dt)
     keep_hi = torch.zeros_like(lo, dtype=torch.bool)  # Illinois: which end was kept last time
     keep_lo = torch.zeros_like(keep_hi)
     out = lo.clone()
     idx = torch.arange(lo.numel(), device=lo.device)
-    for _ in range(max_iter):
+    for _ in range(max_iter // UNROLL):
         open_ = (hi - lo) > xtol * (1.0 + lo.abs())
         left = int(open_.sum())
         if left == 0:
@@ -273,36 +284,42 @@ def bracket_below(fn: PeakFn, hi: Tensor, s: Side, dt: float, xtol: float = 1e-7
             out.index_copy_(0, idx, lo)
             sel = open_.nonzero().squeeze(-1)
             s = s.take(sel)
-            idx, lo, hi, r_lo, r_hi, keep_hi, keep_lo, open_ = (
-                pick(t, sel) for t in (idx, lo, hi, r_lo, r_hi, keep_hi, keep_lo, open_))
-        lo, hi, r_lo, r_hi, keep_hi, keep_lo = _illinois(fn, open_, lo, hi, r_lo, r_hi, keep_hi, keep_lo, s, dt)
+            idx, lo, hi, r_lo, r_hi, keep_hi, keep_lo = (
+                pick(t, sel) for t in (idx, lo, hi, r_lo, r_hi, keep_hi, keep_lo))
+        lo, hi, r_lo, r_hi, keep_hi, keep_lo = _illinois(fn, lo, hi, r_lo, r_hi, keep_hi, keep_lo, s, dt, xtol)
     return out.index_copy_(0, idx, lo)
 
 
 @kernel
-def _widen(fn: PeakFn, bad: Tensor, lo: Tensor, hi: Tensor, r_lo: Tensor, r_hi: Tensor, step: Tensor, s: Side,
+def _widen(fn: PeakFn, lo: Tensor, hi: Tensor, r_lo: Tensor, r_hi: Tensor, step: Tensor, s: Side,
            dt: float) -> tuple[Tensor, Tensor, Tensor, Tensor, Tensor]:
-    """One doubling step down of :func:`bracket_below` for the elements still above the limit (``bad``)."""
-    step = torch.where(bad, 2.0 * step, step)
-    hi, r_hi = torch.where(bad, lo, hi), torch.where(bad, r_lo, r_hi)
-    lo = torch.where(bad, hi - step, lo)
-    r_lo = torch.where(bad, fn(lo, s, dt)[0] - s.pmax, r_lo)
+    """UNROLL doubling steps down of :func:`bracket_below` for the elements still above the limit."""
+    for _ in range(UNROLL):
+        bad = r_lo > 0.0
+        step = torch.where(bad, 2.0 * step, step)
+        hi, r_hi = torch.where(bad, lo, hi), torch.where(bad, r_lo, r_hi)
+        lo = torch.where(bad, hi - step, lo)
+        r_lo = torch.where(bad, fn(lo, s, dt)[0] - s.pmax, r_lo)
     return lo, hi, r_lo, r_hi, step
 
 
 @kernel
-def _illinois(fn: PeakFn, open_: Tensor, lo: Tensor, hi: Tensor, r_lo: Tensor, r_hi: Tensor, keep_hi: Tensor,
-              keep_lo: Tensor, s: Side, dt: float) -> tuple[Tensor, Tensor, Tensor, Tensor, Tensor, Tensor]:
-    """One regula-falsi (Illinois) step of :func:`bracket_below` on the still open brackets (``open_``)."""
-    w_hi = torch.where(keep_hi, 0.5, 1.0) * r_hi
-    w_lo = torch.where(keep_lo, 0.5, 1.0) * r_lo
-    x = hi - w_hi * (hi - lo) / (w_hi - w_lo)
-    x = torch.where((x > lo) & (x < hi), x, 0.5 * (lo + hi))
-    r = fn(x, s, dt)[0] - s.pmax
-    up = open_ & (r > 0.0)
-    down = open_ & ~up
-    return (torch.where(down, x, lo), torch.where(up, x, hi), torch.where(down, r, r_lo), torch.where(up, r, r_hi),
-            torch.where(open_, ~up, keep_hi), torch.where(open_, up, keep_lo))
+def _illinois(fn: PeakFn, lo: Tensor, hi: Tensor, r_lo: Tensor, r_hi: Tensor, keep_hi: Tensor, keep_lo: Tensor,
+              s: Side, dt: float, xtol: float) -> tuple[Tensor, Tensor, Tensor, Tensor, Tensor, Tensor]:
+    """UNROLL regula-falsi (Illinois) steps of :func:`bracket_below` on the brackets still open."""
+    for _ in range(UNROLL):
+        open_ = (hi - lo) > xtol * (1.0 + lo.abs())
+        w_hi = torch.where(keep_hi, 0.5, 1.0) * r_hi
+        w_lo = torch.where(keep_lo, 0.5, 1.0) * r_lo
+        x = hi - w_hi * (hi - lo) / (w_hi - w_lo)
+        x = torch.where((x > lo) & (x < hi), x, 0.5 * (lo + hi))
+        r = fn(x, s, dt)[0] - s.pmax
+        up = open_ & (r > 0.0)
+        down = open_ & ~up
+        lo, hi = torch.where(down, x, lo), torch.where(up, x, hi)
+        r_lo, r_hi = torch.where(down, r, r_lo), torch.where(up, r, r_hi)
+        keep_hi, keep_lo = torch.where(open_, ~up, keep_hi), torch.where(open_, up, keep_lo)
+    return lo, hi, r_lo, r_hi, keep_hi, keep_lo
 
 
 def greedy_root(s: Side, dt: float, probe: Tensor, tol: float = 1e-13) -> Tensor:

@@ -127,6 +127,7 @@ ROWS: tuple[Row, ...] = (
 #: Rows trained from another row's policy (conf/experiment/<model>.yaml: init_from: models/<source>).
 WARM_STARTS = {"iiwa7_ball_balancing_reward": "iiwa7_ball_balancing",
                "iiwa7_ball_balancing_imu": "iiwa7_ball_balancing_reward",
+               "iiwa7_ball_balancing_drive": "iiwa7_ball_balancing_reward",
                "armar4_target_point_balancing": "armar4_target_point",
                "armar4_legs_target_point_balancing": "armar4_target_point"}
 

@@ -20,7 +20,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from pathrl.envs.feedback import USABLE_HALF, FeedbackStep, PlateIMU, ball_observation
+from pathrl.envs.feedback import USABLE_HALF, FeedbackStep, PlateDrive, PlateIMU, ball_observation
 from pathrl.robot.model import RobotSpec
 
 #: Free-standing robot: observation scales (the authors' normalization) and the fall threshold.
@@ -194,13 +194,14 @@ class PyBulletBall(_PooledFeedback):
 
     kind = name = "ball_on_plate"
     num_obs = 4
-    value_names = ("ball_dist", "ball_on_plate")
+    value_names = ("ball_dist", "ball_on_plate", "ball_drive")
     ok_value = "ball_on_plate"
 
     def __init__(self, robot: RobotSpec, num_envs: int, control_rate: float = 240.0, seed: int = 0,
                  workers: int = 2, imu: bool = False):
         super().__init__(robot, num_envs, control_rate, seed, workers)
         self.imu = PlateIMU(robot, num_envs, control_rate) if imu else None
+        self.plate_drive = PlateDrive(robot, num_envs, control_rate, fk=self.imu.fk if imu else None)
         self.num_obs = 4 + (PlateIMU.num_obs if imu else 0)
         self.half = torch.tensor(USABLE_HALF, dtype=torch.float64)
         self.xy = torch.zeros(num_envs, 2, dtype=torch.float64)
@@ -213,11 +214,13 @@ class PyBulletBall(_PooledFeedback):
         self.xy[env_ids] = xy[env_ids]
         self.ok[env_ids] = on[env_ids]
         self.prev_rel[env_ids] = xy[env_ids] / self.half
+        self.plate_drive.reset(env_ids, q)
         if self.imu is not None:
             self.imu.reset(env_ids, q)
 
     def step(self, q: Tensor, qd: Tensor, active: Tensor | None = None) -> FeedbackStep:
         xy, on = self.pool.step(q, qd, active)
+        self.plate_drive.step(q)
         if self.imu is not None:
             self.imu.step(q)
         self.prev_rel = self.xy / self.half
@@ -227,7 +230,8 @@ class PyBulletBall(_PooledFeedback):
         return FeedbackStep(obs=self.observe(), values=self.values(), failed=was_on & ~self.ok)
 
     def values(self) -> dict[str, Tensor]:
-        return {"ball_dist": (self.xy / self.half).norm(dim=1), "ball_on_plate": self.ok.to(torch.float64)}
+        return {"ball_dist": (self.xy / self.half).norm(dim=1), "ball_on_plate": self.ok.to(torch.float64),
+                "ball_drive": self.plate_drive.value}
 
     def observe(self) -> Tensor:
         return ball_observation(self.prev_rel, self.xy / self.half, self.imu).clamp(-1.0, 1.0)
