@@ -7,7 +7,7 @@ from tensordict import TensorDict
 
 from pathrl.envs.reference import ReferencePath, ReferenceTrackingEnv
 from pathrl.envs.rewards import StepQuantities, build_reward_terms, path_length
-from pathrl.envs.tracking import PathTrackingEnv, TrackingEnvCfg
+from pathrl.envs.tracking import PathTrackingEnv, TrackingEnvCfg, tcp_observation
 from pathrl.limits.braking import braking_acceleration
 from pathrl.limits.feasible import JointLimits
 from pathrl.paths.pathset import build_pathset
@@ -211,3 +211,35 @@ def test_passed_knots_follow_a_search_over_the_path():
         if k == 20:
             env.replace_path(torch.tensor([3, 5]), torch.tensor([1, 2]), torch.tensor([0.4, 1.1], dtype=torch.float64))
         assert torch.equal(env.knot_i, env.paths.knot_index_at(env.seg_path, env.s))
+
+
+def test_tcp_observation_by_hand():
+    box = torch.tensor([[-1.0, 1.0], [-1.0, 1.0], [-0.7, 1.3]], dtype=torch.float64)
+    ref = torch.tensor([[[0.5, -1.0, 0.3]]], dtype=torch.float64)  # (N=1, T=1, 3)
+    cmd = torch.tensor([[[0.45, -1.0, 0.4]]], dtype=torch.float64)
+    out = tcp_observation(ref, cmd, box, 0.1)
+    # z: 2 (0.3 + 0.7) / 2 - 1 = 0; error (0.05, 0, -0.1) / 0.1
+    np.testing.assert_allclose(out.numpy(), [[0.5, -1.0, 0.0, 0.5, 0.0, -1.0]], atol=1e-12)
+
+
+def test_tcp_obs_appends_reference_tcp_and_its_error():
+    base, _ = make_env(num_envs=4)
+    env, _ = make_env(num_envs=4, tcp_obs=True)
+    n0 = base.num_obs
+    assert env.num_obs == n0 + 6
+    obs = env.get_observations()["policy"]
+    assert torch.equal(obs[:, :n0], base.get_observations()["policy"])  # the rest of the state is unchanged
+    assert float(obs[:, n0 + 3:].abs().max()) < 1e-6  # at the start the robot is on its path: no error
+    for _ in range(3):
+        obs = env.step(torch.full((4, env.num_actions), 0.3))[0]["policy"]
+    ref = env.pos.clone()
+    ref[:, env.path_index] = env.paths.position_at(env.seg_path, env.s)
+    fk = env.fk
+    err = (fk.tcp_positions(ref) - fk.tcp_positions(env.pos))[:, 0] / 0.1
+    np.testing.assert_allclose(obs[:, n0 + 3:].double().numpy(), err.clamp(-1, 1).numpy(), atol=1e-5)
+    assert float(err.abs().max()) > 1e-3  # the robot has left its path: the error is seen
+
+
+def test_tcp_obs_box_is_validated():
+    with pytest.raises(ValueError, match="tcp_obs_box"):
+        make_env(num_envs=2, tcp_obs=True, tcp_obs_box=(1.0, -1.0, -1.0, 1.0, 0.0, 1.0))

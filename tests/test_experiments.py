@@ -43,6 +43,8 @@ def test_experiment_values():
     ball = _compose(["+experiment=iiwa7_ball_balancing"])
     assert (ball.env.segments, ball.knots.strategy, ball.knots.n_state) == ("full", "distance", 5)
     assert _compose(["+experiment=armar4_random"]).robot.name == "armar4"
+    assert _compose(["+experiment=iiwa7_ball_balancing_tcp"]).env.tcp_obs is True
+    assert _compose([]).env.tcp_obs is False
 
 
 @pytest.mark.parametrize("name", SWEEPS)

@@ -113,6 +113,9 @@ class EnvCfg:
     end_tolerance: float | None = 0.05  # end reached within this weighted joint distance of the end knot (rad)
     free_joint_actions: str = "centred"  # joints outside the path: centred (0 holds) | posture | linear (paper)
     posture_omega: float = 3.0  # free_joint_actions=posture: pull to the start posture (rad/s)
+    tcp_obs: bool = False  # + reference TCP position and reference - commanded TCP in the state (authors' ball)
+    tcp_obs_box: list[float] = field(default_factory=lambda: [-1.0, 1.0, -1.0, 1.0, -0.7, 1.3])  # x, y, z (m)
+    tcp_obs_error: float = 0.1  # TCP error (m) that maps to 1
 
 
 @dataclass

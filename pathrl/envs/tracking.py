@@ -17,6 +17,9 @@ MDP (paper, Sec. III; original_pathtracking.md 3-7):
           control-rate setpoints, adds its sensor values to the state (``feedback_obs``), named values
           for task reward terms, and a failure (ball off the plate) that ends the episode
           (``fail_terminates``).
+  tcp     optional (``tcp_obs``; the authors' ball experiments): per TCP the reference TCP position at the
+          current arc length, normalized in ``tcp_obs_box``, and reference minus commanded TCP position over
+          ``tcp_obs_error``; last in the state (after the feedback), so a warm start appends them.
 
 Fixed step order (per env, batched; every tensor is (N, ...)):
   1. clip actions; a1 = a_min + (1 + action) / 2 (a_max - a_min); envs in braking mode use the braking law.
@@ -64,6 +67,7 @@ from pathrl.limits.integrate import end_of_step, interpolate_step
 from pathrl.limits.kernels import kernel
 from pathrl.paths.pathset import PathSet, table_position
 from pathrl.paths.segments import Segments, full_segments, sample_segments
+from pathrl.robot.kinematics import ForwardKinematics
 from pathrl.robot.model import RobotSpec
 
 try:  # rsl-rl is a training dependency; the env works without it (evaluation, tests).
@@ -96,6 +100,9 @@ class TrackingEnvCfg:
     end_obs: bool = False  # add the vector to the end knot and the arc length left, both at knot-gap scale
     end_tolerance: float | None = None  # also reached: within this (weighted, rad) of the end knot, < D arc left
     feedback_obs: bool = True  # with a feedback source: its sensor values are part of the state
+    tcp_obs: bool = False  # + per TCP the reference position at s and reference - commanded (the authors' ball state)
+    tcp_obs_box: tuple[float, ...] = (-1.0, 1.0, -1.0, 1.0, -0.7, 1.3)  # x, y, z ranges (m) -> [-1, 1]
+    tcp_obs_error: float = 0.1  # reference - commanded TCP (m) that maps to 1
     fail_terminates: bool = True  # with a feedback source: its failure (ball off the plate) ends the episode
     free_joint_actions: str = "centred"  # joints outside the path: centred (0 holds) | posture | linear (paper)
     posture_omega: float = 3.0  # free_joint_actions=posture: natural frequency of the pull to the start posture (rad/s)
@@ -132,6 +139,14 @@ def advance(pos: Tensor, vel: Tensor, acc: Tensor, a1: Tensor, path_index: Tenso
     dev_max = dev.amax(dim=1)
     dev_mean = torch.where(moved > 1e-12, (dev * seg_len).sum(1) / moved.clamp(min=1e-12), dev.mean(dim=1))
     return p1, v1, moved, dev_max, dev_mean
+
+
+def tcp_observation(ref: Tensor, cmd: Tensor, box: Tensor, error_scale: float) -> Tensor:
+    """The TCP part of the state, before clipping: reference and commanded TCP positions (N, T, 3) in metres,
+    `box` (3, 2) [min, max] per axis -> (N, 6 T): per TCP the reference mapped from the box to [-1, 1], then
+    (reference - commanded) / error_scale."""
+    ref_n = 2.0 * (ref - box[:, 0]) / (box[:, 1] - box[:, 0]) - 1.0
+    return torch.cat([ref_n, (ref - cmd) / error_scale], dim=2).flatten(1)
 
 
 @kernel(static=True)
@@ -215,6 +230,13 @@ class PathTrackingEnv(_VecEnvBase):
         self.max_episode_length = int(math.ceil(cfg.episode_budget_s / cfg.dt)) + 1
         if cfg.knot_obs not in ("relative", "absolute"):
             raise ValueError(f"env.knot_obs must be relative or absolute, got {cfg.knot_obs!r}")
+        self.fk = self.tcp_box = None
+        if cfg.tcp_obs:
+            box = torch.as_tensor(cfg.tcp_obs_box, dtype=torch.float64, device=self.device)
+            if box.shape != (6,) or not bool((box[1::2] > box[0::2]).all()) or not cfg.tcp_obs_error > 0:
+                raise ValueError("env.tcp_obs_box must be 6 numbers (x, y, z [min, max], min < max) and "
+                                 f"env.tcp_obs_error > 0, got {list(cfg.tcp_obs_box)}, {cfg.tcp_obs_error}")
+            self.fk, self.tcp_box = ForwardKinematics(robot, device=self.device), box.reshape(3, 2)
 
         f64 = dict(dtype=torch.float64, device=self.device)
         d = robot.dof
@@ -345,6 +367,12 @@ class PathTrackingEnv(_VecEnvBase):
             self.horizon, self.knot_gap, self.cfg.knot_obs == "relative", self.cfg.end_obs)
         if self.feedback is not None and self.cfg.feedback_obs:
             obs = torch.cat([obs, self.feedback.observe().to(obs.dtype)], dim=1)
+        if self.fk is not None:
+            ref = self.pos.clone()
+            ref[:, self.path_index] = self.paths.position_at(self.seg_path, self.s)
+            tcp = self.fk.tcp_positions(torch.cat([ref, self.pos]))
+            obs = torch.cat([obs, tcp_observation(tcp[:self.num_envs], tcp[self.num_envs:], self.tcp_box,
+                                                  self.cfg.tcp_obs_error)], dim=1)
         return obs.clamp(-1.0, 1.0).to(torch.float32)
 
     @property

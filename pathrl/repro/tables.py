@@ -128,6 +128,7 @@ ROWS: tuple[Row, ...] = (
 WARM_STARTS = {"iiwa7_ball_balancing_reward": "iiwa7_ball_balancing",
                "iiwa7_ball_balancing_imu": "iiwa7_ball_balancing_reward",
                "iiwa7_ball_balancing_drive": "iiwa7_ball_balancing_reward",
+               "iiwa7_ball_balancing_tcp": "iiwa7_ball_balancing_reward",
                "armar4_target_point_balancing": "armar4_target_point",
                "armar4_legs_target_point_balancing": "armar4_target_point"}
 

@@ -27,7 +27,9 @@ CHECKPOINT_RE = re.compile(r"^model_(\d+)\.pt$")
 
 #: Config keys added after runs were saved, with the value that reproduces what those runs did: a saved config
 #: without the key resumes under a config holding this value (and is evaluated with it, `env_cfg_from`).
-ADDED_KEYS: dict[str, Any] = {"env.free_joint_actions": "linear", "env.posture_omega": 3.0, "task.imu": False}
+ADDED_KEYS: dict[str, Any] = {"env.free_joint_actions": "linear", "env.posture_omega": 3.0, "task.imu": False,
+                              "env.tcp_obs": False, "env.tcp_obs_box": [-1.0, 1.0, -1.0, 1.0, -0.7, 1.3],
+                              "env.tcp_obs_error": 0.1}
 
 
 def env_cfg_from(cfg: dict[str, Any], num_envs: int | None = None, seed: int | None = None,
@@ -57,6 +59,9 @@ def env_cfg_from(cfg: dict[str, Any], num_envs: int | None = None, seed: int | N
         fail_terminates=bool(task["fail_terminates"]),
         free_joint_actions=str(e.get("free_joint_actions", ADDED_KEYS["env.free_joint_actions"])),
         posture_omega=float(e.get("posture_omega", ADDED_KEYS["env.posture_omega"])),
+        tcp_obs=bool(e.get("tcp_obs", ADDED_KEYS["env.tcp_obs"])),
+        tcp_obs_box=tuple(float(x) for x in e.get("tcp_obs_box", ADDED_KEYS["env.tcp_obs_box"])),
+        tcp_obs_error=float(e.get("tcp_obs_error", ADDED_KEYS["env.tcp_obs_error"])),
     )
 
 
