@@ -2,15 +2,18 @@
 time per decision of policy + limits for one env. Writes bench/results.json and prints a table.
 
 Paths are synthetic smooth paths inside the joint limits (no dataset needed), so the numbers measure
-the env itself. Threads: 1 (fastest for these sizes on the 2-core reference machine). Limit kernels are
-compiled (``pathrl.limits.kernels``, the training and evaluation default) unless ``--eager``; the env and
-decision benchmarks are repeated eagerly for comparison (``*_eager``). Compilation happens in untimed
-warm-up steps.
+the env itself. The valid acceleration range, most of a step, runs in one of three ways (``limits`` in
+each result): ``native`` (the C build in ``pathrl/limits/native``, the default), ``torch`` (the torch
+reference with compiled kernels, ``pathrl.limits.kernels``) and ``eager`` (torch, nothing compiled).
+The env's own fused step and observation kernels are compiled in the first two. Threads: 1, and 2 (both
+cores of the reference machine, as ``pathrl-train`` runs: ``threads: 2`` in ``conf/train.yaml``) for the
+batched env (``*_threads2``). Compilation happens in untimed warm-up steps. ``--quick``: tiny sizes.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import platform
@@ -24,7 +27,7 @@ import torch  # noqa: E402
 
 from pathrl.envs.rewards import build_reward_terms  # noqa: E402
 from pathrl.envs.tracking import PathTrackingEnv, TrackingEnvCfg  # noqa: E402
-from pathrl.limits import kernels  # noqa: E402
+from pathrl.limits import feasible, kernels  # noqa: E402
 from pathrl.paths.pathset import build_pathset  # noqa: E402
 from pathrl.robot.model import RobotSpec, load_robot_by_name  # noqa: E402
 
@@ -67,10 +70,29 @@ def run_steps(env: PathTrackingEnv, seconds: float, warmup: int) -> tuple[int, f
     return steps, steps * env.num_envs / (time.perf_counter() - t0)
 
 
-def bench_env(robot_name: str, num_envs: int, seconds: float) -> dict:
-    env = make_env(load_robot_by_name(robot_name), num_envs)
-    steps, rate = run_steps(env, seconds, warmup=30 if kernels.compiled() else 5)
-    return {"robot": robot_name, "num_envs": num_envs, "compiled": kernels.compiled(), "steps": steps,
+@contextlib.contextmanager
+def limit_code(mode: str, threads: int = 1):
+    """Valid-range code ``native`` | ``torch`` (compiled kernels) | ``eager`` and torch threads inside the block."""
+    if mode not in ("native", "torch", "eager"):
+        raise ValueError(f"unknown limit code {mode!r}")
+    before = torch.get_num_threads()
+    feasible.set_native(mode == "native")
+    torch.set_num_threads(threads)
+    try:
+        with kernels.use_compiled(mode != "eager"):
+            yield
+    finally:
+        feasible.set_native(True)
+        torch.set_num_threads(before)
+
+
+def bench_env(robot_name: str, num_envs: int, seconds: float, mode: str = "native", threads: int = 1) -> dict:
+    with limit_code(mode, threads):
+        if mode == "native" and not feasible.native_on():
+            raise RuntimeError("the native limit code is not built (no C compiler?)")
+        env = make_env(load_robot_by_name(robot_name), num_envs)
+        steps, rate = run_steps(env, seconds, warmup=5 if mode == "eager" else 30)
+    return {"robot": robot_name, "num_envs": num_envs, "limits": mode, "threads": threads, "steps": steps,
             "env_steps_per_s": rate}
 
 
@@ -122,8 +144,13 @@ def bench_ppo_iteration(num_envs: int, iterations: int) -> dict:
             "samples_per_s": samples / dt}
 
 
-def bench_decision(robot_name: str, repeats: int = 300) -> dict:
+def bench_decision(robot_name: str, repeats: int = 300, mode: str = "native") -> dict:
     """Time of one decision for one env: observation -> policy (MLP 256-128) -> limits -> setpoints."""
+    with limit_code(mode):
+        return _decision(robot_name, repeats) | {"limits": mode}
+
+
+def _decision(robot_name: str, repeats: int) -> dict:
     from pathrl.limits.feasible import JointLimits, action_to_acceleration, valid_acceleration_range
     from pathrl.limits.integrate import interpolate_step
 
@@ -144,7 +171,7 @@ def bench_decision(robot_name: str, repeats: int = 300) -> dict:
             interpolate_step(p, v, a, a1, 0.1, 24)
             times.append(time.perf_counter() - t0)
     t = np.array(times[50:])  # the first calls compile
-    return {"robot": robot_name, "compiled": kernels.compiled(), "mean_ms": 1e3 * t.mean(), "max_ms": 1e3 * t.max(),
+    return {"robot": robot_name, "mean_ms": 1e3 * t.mean(), "max_ms": 1e3 * t.max(),
             "max_pct_of_step": 100 * t.max() / 0.1}
 
 
@@ -199,37 +226,43 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--seconds", type=float, default=5.0, help="time per env benchmark")
     ap.add_argument("--quick", action="store_true", help="tiny sizes (tests)")
-    ap.add_argument("--eager", action="store_true", help="limit kernels not compiled (implied by --quick)")
+    ap.add_argument("--limits", default="native,torch,eager",
+                    help="valid-range code to measure, comma-separated: native, torch (compiled), eager")
     ap.add_argument("--out", default=str(ROOT / "bench" / "results.json"))
     args = ap.parse_args()
     torch.set_num_threads(1)
-    compiled = not (args.eager or args.quick)
-    sec = 0.5 if args.quick else args.seconds
-    n = 256 if args.quick else 4096
+    quick = args.quick
+    sec = 0.5 if quick else args.seconds
+    n = 256 if quick else 4096
+    modes = tuple(args.limits.split(","))
+    if not modes or any(m not in ("native", "torch", "eager") for m in modes):
+        ap.error(f"--limits: expected a comma-separated subset of native,torch,eager, got {args.limits!r}")
     res = {"machine": {"cpus": os.cpu_count(), "platform": platform.platform(), "torch": torch.__version__,
-                       "threads": torch.get_num_threads()}}
-    if compiled:
-        res["env_iiwa7_eager"] = bench_env("iiwa7", n, sec)
-        res["env_armar4_legs_eager"] = bench_env("armar4_legs", n, sec)
-        for name in ("iiwa7", "armar6", "armar4_legs"):
-            res[f"decision_{name}_eager"] = bench_decision(name)
-    kernels.set_compiled(compiled)
-    res["env_iiwa7"] = bench_env("iiwa7", n, sec)
-    res["env_armar4_legs"] = bench_env("armar4_legs", n, sec)
+                       "native_limits": feasible.native_on()}}
+    suffix = {"native": "", "torch": "_torch", "eager": "_eager"}
+    for robot in ("iiwa7", "armar4_legs"):
+        for mode in modes:
+            res[f"env_{robot}{suffix[mode]}"] = bench_env(robot, n, sec, mode)
+        res[f"env_{robot}{suffix[modes[0]]}_threads2"] = bench_env(robot, n, sec, modes[0], threads=2)
+    for robot in ("iiwa7", "armar6", "armar4_legs"):
+        for mode in modes:
+            res[f"decision_{robot}{suffix[mode]}"] = bench_decision(robot, mode=mode)
+    main_key = f"env_iiwa7{suffix[modes[0]]}"
     res["reference_iiwa7"] = bench_reference("iiwa7", sec)
     ref_rate = res["reference_iiwa7"]["env_steps_per_s"]
-    res["batched_over_reference_iiwa7"] = res["env_iiwa7"]["env_steps_per_s"] / ref_rate
-    res["ppo_iteration_iiwa7"] = bench_ppo_iteration(n, 1 if args.quick else 3)
-    res["decision_iiwa7"] = bench_decision("iiwa7")
-    res["decision_armar4_legs"] = bench_decision("armar4_legs")
-    res["decision_armar6"] = bench_decision("armar6")
+    res["batched_over_reference_iiwa7"] = res[main_key]["env_steps_per_s"] / ref_rate
+    with limit_code(modes[0]):
+        res["ppo_iteration_iiwa7"] = bench_ppo_iteration(n, 1 if quick else 3)
     res["physics_ball_on_plate"] = bench_physics("ball_on_plate", sec)
     res["physics_armar4_standing"] = bench_physics("armar4_standing", sec)
-    res["ball_task_analytic"] = bench_ball_task("analytic", n, sec)
-    res["ball_task_pybullet"] = bench_ball_task("pybullet", 16 if args.quick else 64, sec)
+    with limit_code(modes[0]):
+        res["ball_task_analytic"] = bench_ball_task("analytic", n, sec)
+        res["ball_task_pybullet"] = bench_ball_task("pybullet", 16 if quick else 64, sec)
     pyb = res["ball_task_pybullet"]["env_steps_per_s"]
     res["ball_task_analytic_over_pybullet"] = res["ball_task_analytic"]["env_steps_per_s"] / pyb
-    res["kinematic_tracking_over_pybullet_ball"] = res["env_iiwa7"]["env_steps_per_s"] / pyb
+    # Both sides on both cores: the PyBullet env steps its scenes in 2 worker processes.
+    res["kinematic_tracking_over_pybullet_ball"] = res[main_key + "_threads2"]["env_steps_per_s"] / pyb
+    res["kinematic_tracking_1thread_over_pybullet_ball"] = res[main_key]["env_steps_per_s"] / pyb
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = out.with_suffix(".json.tmp")
@@ -245,12 +278,10 @@ def _print(res: dict, out: Path) -> None:
     t = Table(title=f"pathrl benchmarks -> {out}")
     t.add_column("benchmark")
     t.add_column("result", justify="right")
-    for key, label in (("env_iiwa7", "env iiwa7"), ("env_armar4_legs", "env armar4_legs (30 joints)")):
-        for suffix in ("", "_eager"):
-            if key + suffix in res:
-                e = res[key + suffix]
-                mode = "compiled" if e["compiled"] else "eager"
-                t.add_row(f"{label}, {e['num_envs']} envs, {mode}", f"{e['env_steps_per_s']:,.0f} steps/s")
+    for key in sorted(k for k in res if k.startswith("env_")):
+        e = res[key]
+        t.add_row(f"env {e['robot']}, {e['num_envs']} envs, limits {e['limits']}, {e['threads']} thread(s)",
+                  f"{e['env_steps_per_s']:,.0f} steps/s")
     t.add_row("single-env reference iiwa7", f"{res['reference_iiwa7']['env_steps_per_s']:,.0f} steps/s")
     t.add_row("batched / reference (iiwa7)", f"{res['batched_over_reference_iiwa7']:,.0f} x")
     p = res["ppo_iteration_iiwa7"]
@@ -259,12 +290,13 @@ def _print(res: dict, out: Path) -> None:
         b = res[k]
         t.add_row(f"ball task, {b['backend']}, {b['num_envs']} envs", f"{b['env_steps_per_s']:,.0f} steps/s")
     t.add_row("ball task analytic / PyBullet", f"{res['ball_task_analytic_over_pybullet']:,.0f} x")
-    t.add_row("kinematic tracking env / PyBullet ball env", f"{res['kinematic_tracking_over_pybullet_ball']:,.0f} x")
-    for k in [f"decision_{r}{s}" for s in ("", "_eager") for r in ("iiwa7", "armar6", "armar4_legs")]:
-        if k not in res:
-            continue
+    t.add_row("kinematic tracking env (2 threads) / PyBullet ball env (2 workers)",
+              f"{res['kinematic_tracking_over_pybullet_ball']:,.0f} x")
+    t.add_row("kinematic tracking env (1 thread) / PyBullet ball env (2 workers)",
+              f"{res['kinematic_tracking_1thread_over_pybullet_ball']:,.0f} x")
+    for k in sorted(k for k in res if k.startswith("decision_")):
         d = res[k]
-        t.add_row(f"policy + limits per decision, {d['robot']}, {'compiled' if d['compiled'] else 'eager'}",
+        t.add_row(f"policy + limits per decision, {d['robot']}, limits {d['limits']}",
                   f"{d['mean_ms']:.2f} ms (max {d['max_pct_of_step']:.1f} % of 0.1 s)")
     for k in ("physics_ball_on_plate", "physics_armar4_standing"):
         d = res[k]

@@ -1,0 +1,126 @@
+"""The native valid-range code (``pathrl/limits/native``) equals the torch reference and falls back safely.
+
+Compared on states near every limit (the klimits test's sampler: positions near both limits with velocity
+towards them, velocities and accelerations near theirs) and on states of rollouts that drive the joints
+into their limits (the property test's action patterns). Agreement: 1e-9 of the acceleration limit (the
+same tolerance as compiled vs eager torch); NaN/inf where and only where the torch code has them.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import torch
+from test_limits import _near_limit_states
+from test_limits_property import _SHIPPED, DT, ROBOTS, _actions
+
+from pathrl.limits import feasible, native
+from pathrl.limits.feasible import action_to_acceleration
+from pathrl.limits.integrate import end_of_step
+
+TOL = 1e-9  # relative to the acceleration limit
+
+
+def _agree(p, v, a, lim, stop_at_knot: bool) -> int:
+    """Asserts native == torch on these states; returns the number of compared elements."""
+    lo_t, hi_t, _ = feasible._valid_range_torch(p, v, a, lim, DT, stop_at_knot)
+    lo_n, hi_n, _ = native.valid_range(p, v, a, lim.pos, lim.vel, lim.acc, lim.jerk,
+                                       feasible._reach_radius(lim, DT), DT, stop_at_knot)
+    for ref, got in ((lo_t, lo_n), (hi_t, hi_n)):
+        assert torch.equal(ref.isfinite(), got.isfinite())
+        fin = ref.isfinite()
+        err = ((ref - got).abs() / lim.acc).where(fin, torch.zeros_like(ref))
+        assert float(err.max()) < TOL, float(err.max())
+    return lo_t.numel()
+
+
+def test_native_code_is_built_here() -> None:
+    """CI has a C compiler: the default path must be the native one (a silent fallback would hide a break)."""
+    assert native.available()
+    assert feasible.native_on()
+
+
+@pytest.mark.parametrize("stop_at_knot", [True, False])
+@pytest.mark.parametrize("robot", ROBOTS)
+def test_native_equals_torch_near_limits(robot: str, stop_at_knot: bool) -> None:
+    lim = _SHIPPED[ROBOTS.index(robot)]
+    p, v, a = (torch.as_tensor(x) for x in _near_limit_states(lim, 20_000, np.random.default_rng(11)))
+    assert _agree(p, v, a, lim, stop_at_knot) == 20_000 * lim.dof
+
+
+@pytest.mark.parametrize("robot", ROBOTS)
+def test_native_equals_torch_along_rollouts(robot: str) -> None:
+    """States of limit-seeking rollouts (each driven by the torch ranges, so both see the same states)."""
+    lim = _SHIPPED[ROBOTS.index(robot)]
+    g = torch.Generator().manual_seed(5)
+    n = 128
+    p = lim.pos[:, 0] + (lim.pos[:, 1] - lim.pos[:, 0]) * torch.rand(n, lim.dof, generator=g, dtype=torch.float64)
+    v, a, held = torch.zeros_like(p), torch.zeros_like(p), torch.zeros_like(p)
+    compared = 0
+    for k in range(150):
+        compared += _agree(p, v, a, lim, stop_at_knot=True)
+        lo, hi, _ = feasible._valid_range_torch(p, v, a, lim, DT, True)
+        a1 = action_to_acceleration(_actions(k, held, g), lo, hi)
+        (p, v), a = end_of_step(p, v, a, a1, DT), a1
+    assert compared == 150 * n * lim.dof
+
+
+def test_threads_split_rows_without_changing_results() -> None:
+    lim = _SHIPPED[0]
+    p, v, a = (torch.as_tensor(x) for x in _near_limit_states(lim, 4096, np.random.default_rng(2)))
+    before = torch.get_num_threads()
+    try:
+        torch.set_num_threads(1)
+        one = feasible._valid_range(p, v, a, lim, DT, True)
+        torch.set_num_threads(2)
+        two = feasible._valid_range(p, v, a, lim, DT, True)
+    finally:
+        torch.set_num_threads(before)
+    assert all(torch.equal(x, y) for x, y in zip(one, two, strict=True))
+
+
+def test_inputs_it_cannot_take_use_the_torch_code() -> None:
+    lim = _SHIPPED[0]
+    p = torch.zeros(3, lim.dof, dtype=torch.float64)
+    assert native.applies(p, lim.pos)
+    assert not native.applies(p.float(), lim.pos)
+    assert not native.applies(p.clone().requires_grad_(), lim.pos)
+    feasible.set_native(False)
+    try:
+        assert not feasible.native_on()
+        lo, hi = feasible.valid_acceleration_range(p, p, p, lim, DT)  # the torch code
+    finally:
+        feasible.set_native(True)
+    lo_n, hi_n = feasible.valid_acceleration_range(p, p, p, lim, DT)
+    assert torch.allclose(lo, lo_n, rtol=0, atol=1e-12) and torch.allclose(hi, hi_n, rtol=0, atol=1e-12)
+
+
+def _probe(env: dict) -> subprocess.CompletedProcess:
+    code = ("import warnings, torch; warnings.simplefilter('always')\n"
+            "from pathrl.limits import feasible, native\n"
+            "from pathrl.limits.feasible import JointLimits\n"
+            "from pathrl.robot.model import load_robot_by_name\n"
+            "lim = JointLimits.from_robot(load_robot_by_name('iiwa7'))\n"
+            "p = torch.zeros(2, 7, dtype=torch.float64)\n"
+            "lo, hi = feasible.valid_acceleration_range(p, p, p, lim, 0.1)\n"
+            "print('native' if native.available() else 'torch', float(hi[0, 0]))\n")
+    return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env={**os.environ, **env},
+                          timeout=120)
+
+
+def test_switch_off_and_missing_compiler_fall_back_to_torch(tmp_path) -> None:
+    off = _probe({"PATHRL_NATIVE_LIMITS": "0"})
+    assert off.returncode == 0, off.stderr
+    assert off.stdout.split()[0] == "torch" and "unavailable" not in off.stderr
+    broken = _probe({"PATHRL_CACHE_DIR": str(tmp_path / "cache"), "CC": "false"})
+    assert broken.returncode == 0, broken.stderr
+    assert broken.stdout.split()[0] == "torch"
+    assert "native limit code unavailable" in broken.stderr
+    assert off.stdout.split()[1] == broken.stdout.split()[1]  # the same range either way
+    built = _probe({"PATHRL_CACHE_DIR": str(tmp_path / "cache2")})
+    assert built.returncode == 0 and built.stdout.split() == ["native", off.stdout.split()[1]], built.stderr
+    assert len(list((tmp_path / "cache2").glob("pathrl_valid_range_*.so"))) == 1  # no temp files left
