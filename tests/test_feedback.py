@@ -396,6 +396,6 @@ def test_ball_drive_is_the_same_in_both_backends(iiwa):
     assert torch.allclose(a, b, rtol=0.0, atol=1e-12)
     assert a[0].item() < 1e-9 < 0.05 < a[1].item()
     zero = torch.zeros(2, dtype=torch.float64)
-    q = StepQuantities(zero, zero, zero, zero, zero, zero, zero.bool(),
-                       task={"ball_drive": torch.tensor([0.0, 0.05, 0.2]), "ball_on_plate": torch.tensor([1.0, 1.0, 1.0])})
+    task = {"ball_drive": torch.tensor([0.0, 0.05, 0.2]), "ball_on_plate": torch.tensor([1.0, 1.0, 1.0])}
+    q = StepQuantities(zero, zero, zero, zero, zero, zero, zero.bool(), task=task)
     assert ball_drive(q, threshold=0.1).tolist() == pytest.approx([1.0, 0.25, 0.0])

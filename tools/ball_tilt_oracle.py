@@ -105,7 +105,8 @@ def main() -> None:
         q = paths.position_at(ids, s)
         qc = tilt_correction(fk, q, args.iters, args.lam)
         dev = (qc - q).norm(dim=-1)
-        tcp = (fk.tcp_positions(qc.reshape(-1, q.shape[-1])) - fk.tcp_positions(q.reshape(-1, q.shape[-1]))).norm(dim=-1)
+        flat = q.reshape(-1, q.shape[-1])
+        tcp = (fk.tcp_positions(qc.reshape(flat.shape)) - fk.tcp_positions(flat)).norm(dim=-1)
         print(f"T = {duration:4.1f} s, {len(ids)} paths: level plate lost {balls_lost(robot, q):5.1f} %, tilted "
               f"{balls_lost(robot, qc):5.1f} % (joint correction mean {float(dev.mean()):.3f} rad, 95th pct "
               f"{float(dev.quantile(0.95)):.3f} rad; TCP mean {100 * float(tcp.mean()):.1f} cm)")

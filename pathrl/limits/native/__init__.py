@@ -65,7 +65,8 @@ def _library() -> ctypes.CDLL | None:
             _build(SOURCE, target)
         lib = ctypes.CDLL(str(target))
     except (OSError, subprocess.CalledProcessError) as err:
-        detail = err.stderr.strip().splitlines()[-1] if isinstance(err, subprocess.CalledProcessError) and err.stderr else err
+        failed_build = isinstance(err, subprocess.CalledProcessError) and err.stderr
+        detail = err.stderr.strip().splitlines()[-1] if failed_build else err
         warnings.warn(f"pathrl: native limit code unavailable ({detail}); using the torch code", stacklevel=2)
         return None
     dptr, i64 = ctypes.POINTER(ctypes.c_double), ctypes.c_int64
