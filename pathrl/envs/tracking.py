@@ -334,16 +334,22 @@ class PathTrackingEnv(_VecEnvBase):
         self.braking[env_ids] = False
         self._update_window()
 
-    def _pass_knots(self) -> None:
+    def _pass_knots(self, look: int = 4) -> None:
         """Move ``knot_i`` past the knots the step's progress reached (s only grows between resets): the
-        result equals ``paths.knot_index_at(seg_path, s)`` without searching each env's whole knot row."""
-        knot_s, last = self.paths.knot_s, self.paths.knot_s.shape[1] - 1
+        result equals ``paths.knot_index_at(seg_path, s)`` without searching each env's whole knot row.
+
+        The next `look` knots of every env are compared at once (knot_s is sorted, so the passed ones are a
+        prefix); a step rarely passes more, and then the window moves on."""
+        width = self.paths.knot_s.shape[1]
+        flat, ahead = self.paths.knot_s.reshape(-1), torch.arange(1, look + 1, device=self.device)
         while True:
-            nxt = (self.knot_i + 1).clamp(max=last)
-            passed = (knot_s[self.seg_path, nxt] <= self.s) & (self.knot_i < last)
-            if not bool(passed.any()):
-                return
+            nxt = self.knot_i.unsqueeze(1) + ahead  # (N, look)
+            exists = nxt < width
+            ks = flat.index_select(0, (self.seg_path.unsqueeze(1) * width + nxt.clamp(max=width - 1)).view(-1))
+            passed = ((ks.view(nxt.shape) <= self.s.unsqueeze(1)) & exists).sum(dim=1)
             self.knot_i = self.knot_i + passed
+            if not bool((passed == look).any()):
+                return
 
     def set_paths(self, paths: PathSet) -> None:
         """Swap the path bank (e.g. an evaluation split). Envs keep running until they are reset."""

@@ -116,8 +116,9 @@ def valid_range(p: Tensor, v: Tensor, a: Tensor, pos: Tensor, vel: Tensor, acc: 
         lib.pathrl_valid_range(*args, 0, rows, *tail)
     else:
         bounds = [rows * k // chunks for k in range(chunks + 1)]
-        futures = [_pool(chunks).submit(lib.pathrl_valid_range, *args, bounds[k], bounds[k + 1], *tail)
-                   for k in range(chunks)]
+        futures = [_pool(chunks - 1).submit(lib.pathrl_valid_range, *args, bounds[k], bounds[k + 1], *tail)
+                   for k in range(1, chunks)]
+        lib.pathrl_valid_range(*args, bounds[0], bounds[1], *tail)  # the first chunk on this thread
         for f in futures:
             f.result()
     return lo, hi, overlap
