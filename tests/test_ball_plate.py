@@ -86,3 +86,53 @@ def test_ball_ranges_and_single_tcp():
     assert all(1e-4 <= b.rolling_friction <= 7e-4 for b in balls)
     with pytest.raises(ValueError, match="one TCP"):
         plate_urdf(load_robot_by_name("armar6"))
+
+
+def _roll_down_incline(c, ball_id: int, start: tuple[float, float, float], seconds: float = 1.0) -> float:
+    import pybullet as p
+
+    for _ in range(int(round(seconds * 240))):
+        p.stepSimulation(physicsClientId=c)
+    pos, _ = p.getBasePositionAndOrientation(ball_id, physicsClientId=c)
+    return float(np.linalg.norm(np.subtract(pos, start)))
+
+
+@pytest.mark.parametrize("mass", [0.002, 0.2])
+def test_a_ball_loaded_like_the_authors_rolls_like_ours(tmp_path, mass):
+    """The authors load a unit sphere URDF (mass 0.1, inertia 1: 25x a solid sphere's) scaled to the radius, then
+    set the mass with changeDynamics. PyBullet ignores URDF inertia unless asked to, and changeDynamics recomputes
+    it from the shape: on a 3 deg incline their ball and ours (a sphere shape) cover the same distance, 5/7 g sin
+    minus rolling friction, not the 1/26 g sin a large inertia would give."""
+    import pybullet as p
+
+    urdf = tmp_path / "unit_sphere.urdf"
+    urdf.write_text('<robot name="s"><link name="b"><inertial><mass value="0.1"/><inertia ixx="1" ixy="0" ixz="0" '
+                    'iyy="1" iyz="0" izz="1"/></inertial><collision><geometry><sphere radius="1"/></geometry>'
+                    '</collision></link></robot>')
+    theta, r = np.radians(3.0), BALL.radius
+    normal = (np.sin(theta), 0.0, np.cos(theta))
+    start = tuple(float(x) * (0.001 + r) for x in normal)
+    dist = []
+    for authors in (True, False):
+        c = p.connect(p.DIRECT)
+        try:
+            p.setGravity(0, 0, -9.81, physicsClientId=c)
+            box = p.createCollisionShape(p.GEOM_BOX, halfExtents=[2, 2, 0.001], physicsClientId=c)
+            p.createMultiBody(0, box, baseOrientation=p.getQuaternionFromEuler([0, theta, 0]), physicsClientId=c)
+            if authors:
+                ball = p.loadURDF(str(urdf), basePosition=start, globalScaling=r, physicsClientId=c)
+                p.changeDynamics(ball, -1, mass=mass, lateralFriction=1.0, rollingFriction=BALL.rolling_friction,
+                                 spinningFriction=BALL.spinning_friction, physicsClientId=c)
+            else:
+                shape = p.createCollisionShape(p.GEOM_SPHERE, radius=r, physicsClientId=c)
+                ball = p.createMultiBody(mass, shape, basePosition=start, physicsClientId=c)
+                p.changeDynamics(ball, -1, lateralFriction=1.0, rollingFriction=BALL.rolling_friction,
+                                 spinningFriction=BALL.spinning_friction, physicsClientId=c)
+            inertia = p.getDynamicsInfo(ball, -1, physicsClientId=c)[2]
+            assert inertia[0] == pytest.approx(0.4 * mass * r * r, rel=1e-6)
+            dist.append(_roll_down_incline(c, ball, start))
+        finally:
+            p.disconnect(c)
+    solid = 0.5 * 5 / 7 * 9.81 * np.sin(theta)  # no rolling friction, 1 s
+    assert dist[0] == pytest.approx(dist[1], abs=1e-6)
+    assert 0.8 * solid < dist[0] < solid

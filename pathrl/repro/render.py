@@ -123,8 +123,9 @@ def _table_ix(results: dict[str, Any], paper: dict[str, Any]) -> tuple[list[str]
              "One env, one torch thread, CPU time per decision: the policy, the setpoints, the valid acceleration "
              "range and state of the next decision; *with simulation* adds the 24 PyBullet steps per decision "
              "(iiwa7: plate and ball; ARMAR-4: free-standing; ARMAR-6: fixed base). The paper's figure includes "
-             "its simulation (i7-8700K). Limit kernels compiled (`pathrl/limits/kernels.py`); the timed pass "
-             "repeats an untimed one over the same episodes.", "",
+             "its simulation (i7-8700K). The valid range runs as in training and evaluation: natively "
+             "(`pathrl/limits/native`) where it is built, else as compiled torch kernels (`limits` in each raw "
+             "result); the timed pass repeats an untimed one over the same episodes.", "",
              "| row | policy + limits (%) | with simulation (%) | decision mean / max (ms) | episodes |",
              "|---|---|---|---|---|"]
     csv_rows: list[list[str]] = []
