@@ -1,6 +1,6 @@
 """Compiled limit kernels (``pathrl.limits.kernels``) give the eager results and stay safe.
 
-These test the torch code of the valid range, so the native code (``pathrl.limits.native``, the default
+These test the torch code of the valid range, so the native code (``pathrl.native``, the default
 where it builds) is switched off here; ``tests/test_limits_native.py`` compares the two.
 
 The first test compiles every kernel (minutes on a fresh 2-core machine; inductor's disk cache makes
@@ -14,7 +14,8 @@ import pytest
 import torch
 from test_limits_property import _SHIPPED, DT, ROBOTS, _actions, _rollout
 
-from pathrl.limits import feasible, kernels
+from pathrl import native
+from pathrl.limits import kernels
 from pathrl.limits.braking import braking_acceleration
 from pathrl.limits.feasible import action_to_acceleration, valid_acceleration_range
 from pathrl.limits.integrate import end_of_step
@@ -22,9 +23,9 @@ from pathrl.limits.integrate import end_of_step
 
 @pytest.fixture(autouse=True)
 def torch_limit_code():
-    feasible.set_native(False)
+    native.set_enabled(False)
     yield
-    feasible.set_native(True)
+    native.set_enabled(True)
 
 
 @pytest.fixture

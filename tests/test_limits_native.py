@@ -1,4 +1,4 @@
-"""The native valid-range code (``pathrl/limits/native``) equals the torch reference and falls back safely.
+"""The native valid-range code (``pathrl/native/valid_range.c``) equals the torch reference and falls back safely.
 
 Compared on states near every limit (the klimits test's sampler: positions near both limits with velocity
 towards them, velocities and accelerations near theirs) and on states of rollouts that drive the joints
@@ -18,7 +18,8 @@ import torch
 from test_limits import _near_limit_states
 from test_limits_property import _SHIPPED, DT, ROBOTS, _actions
 
-from pathrl.limits import feasible, native
+from pathrl import native
+from pathrl.limits import feasible
 from pathrl.limits.feasible import action_to_acceleration
 from pathrl.limits.integrate import end_of_step
 
@@ -41,7 +42,7 @@ def _agree(p, v, a, lim, stop_at_knot: bool) -> int:
 def test_native_code_is_built_here() -> None:
     """CI has a C compiler: the default path must be the native one (a silent fallback would hide a break)."""
     assert native.available()
-    assert feasible.native_on()
+    assert native.enabled()
 
 
 @pytest.mark.parametrize("stop_at_knot", [True, False])
@@ -75,12 +76,21 @@ def test_threads_split_rows_without_changing_results() -> None:
     before = torch.get_num_threads()
     try:
         torch.set_num_threads(1)
+        assert native.threads() == 1
         one = feasible._valid_range(p, v, a, lim, DT, True)
-        torch.set_num_threads(2)
+        torch.set_num_threads(2)  # followed by default
+        assert native.threads() == 2
         two = feasible._valid_range(p, v, a, lim, DT, True)
+        torch.set_num_threads(1)
+        native.set_threads(3)  # or set on its own
+        assert native.threads() == 3
+        three = feasible._valid_range(p, v, a, lim, DT, True)
     finally:
         torch.set_num_threads(before)
-    assert all(torch.equal(x, y) for x, y in zip(one, two, strict=True))
+        native.set_threads(None)
+    assert all(torch.equal(x, y) and torch.equal(x, z) for x, y, z in zip(one, two, three, strict=True))
+    with pytest.raises(ValueError, match=">= 1"):
+        native.set_threads(0)
 
 
 def test_inputs_it_cannot_take_use_the_torch_code() -> None:
@@ -89,19 +99,20 @@ def test_inputs_it_cannot_take_use_the_torch_code() -> None:
     assert native.applies(p, lim.pos)
     assert not native.applies(p.float(), lim.pos)
     assert not native.applies(p.clone().requires_grad_(), lim.pos)
-    feasible.set_native(False)
+    native.set_enabled(False)
     try:
-        assert not feasible.native_on()
+        assert not native.enabled()
         lo, hi = feasible.valid_acceleration_range(p, p, p, lim, DT)  # the torch code
     finally:
-        feasible.set_native(True)
+        native.set_enabled(True)
     lo_n, hi_n = feasible.valid_acceleration_range(p, p, p, lim, DT)
     assert torch.allclose(lo, lo_n, rtol=0, atol=1e-12) and torch.allclose(hi, hi_n, rtol=0, atol=1e-12)
 
 
 def _probe(env: dict) -> subprocess.CompletedProcess:
     code = ("import warnings, torch; warnings.simplefilter('always')\n"
-            "from pathrl.limits import feasible, native\n"
+            "from pathrl import native\n"
+            "from pathrl.limits import feasible\n"
             "from pathrl.limits.feasible import JointLimits\n"
             "from pathrl.robot.model import load_robot_by_name\n"
             "lim = JointLimits.from_robot(load_robot_by_name('iiwa7'))\n"
@@ -123,4 +134,30 @@ def test_switch_off_and_missing_compiler_fall_back_to_torch(tmp_path) -> None:
     assert off.stdout.split()[1] == broken.stdout.split()[1]  # the same range either way
     built = _probe({"PATHRL_CACHE_DIR": str(tmp_path / "cache2")})
     assert built.returncode == 0 and built.stdout.split() == ["native", off.stdout.split()[1]], built.stderr
-    assert len(list((tmp_path / "cache2").glob("pathrl_valid_range_*.so"))) == 1  # no temp files left
+    assert len(list((tmp_path / "cache2").glob("pathrl_native_*.so"))) == 1  # no temp files left
+
+
+def test_native_env_step_equals_torch() -> None:
+    """``advance.c`` equals :func:`pathrl.envs.tracking.advance` (eager): moving, resting and clamped envs."""
+    from pathrl.envs.tracking import advance
+    from pathrl.paths.pathset import build_pathset
+
+    rng = np.random.default_rng(0)
+    paths = build_pathset([np.cumsum(rng.uniform(-0.1, 0.1, (10, 3)), axis=0) for _ in range(4)], list("abcd"))
+    g = torch.Generator().manual_seed(5)
+    n = 257
+    pos, vel, acc, a1 = (torch.randn(n, 4, generator=g, dtype=torch.float64) * 0.1 for _ in range(4))
+    vel[:8], acc[:8], a1[:8] = 0.0, 0.0, 0.0  # at rest: the deviation is a plain mean
+    path = torch.randint(4, (n,), generator=g)
+    s = torch.rand(n, generator=g, dtype=torch.float64) * paths.length[path]
+    end_s = torch.minimum(s + 0.3 * torch.rand(n, generator=g, dtype=torch.float64), paths.length[path])
+    args = (pos, vel, acc, a1, torch.tensor([0, 2, 3]), s, end_s, path, paths.table, paths.length,
+            torch.tensor([1.0, 2.0, 0.5], dtype=torch.float64))
+    assert native.applies(*args)
+    ref = advance(*args, 0.1, 8, paths.table_step)
+    got = native.advance(*args, 0.1, 8, paths.table_step)
+    assert bool((got[2][:8] == 0).all()) and bool((got[2][8:] > 0).all())
+    for r, c in zip(ref, got, strict=True):
+        torch.testing.assert_close(c, r, rtol=1e-12, atol=1e-14)
+    with pytest.raises(ValueError, match="unsupported sizes"):
+        native.advance(*args, 0.1, 100, paths.table_step)

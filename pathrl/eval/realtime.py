@@ -19,10 +19,11 @@ from typing import Any
 import numpy as np
 import torch
 
+from pathrl import native
 from pathrl.dataset.io import load_pathset
 from pathrl.envs.rewards import build_reward_terms
 from pathrl.envs.tracking import PathTrackingEnv, TrackingEnvCfg
-from pathrl.limits import feasible, kernels
+from pathrl.limits import kernels
 from pathrl.limits.integrate import interpolate_step
 from pathrl.paths.knots import KnotStrategy
 from pathrl.paths.segments import Segments, evaluation_plan
@@ -77,7 +78,7 @@ def _realtime_ratios(robot: RobotSpec, dataset_path: str, episodes: int, simulat
     r = np.asarray(ratios)
     d = np.asarray(per_decision)
     return {"robot": robot.name, "simulated": simulate, "compile_limits": compile_limits,
-            "limits": "native" if feasible.native_on() else "torch", "episodes": episodes,
+            "limits": "native" if native.enabled() else "torch", "episodes": episodes,
             "decisions": int(d.size), "max_compute_to_duration_pct": float(r.max()),
             "mean_compute_to_duration_pct": float(r.mean()), "decision_ms_mean": 1e3 * float(d.mean()),
             "decision_ms_max": 1e3 * float(d.max())}

@@ -27,9 +27,9 @@ klimits is measured in ``tests/test_limits.py``; safety of whole trajectories in
 ``tests/test_limits_property.py``.
 
 The torch code here is the reference and runs on any device. For float64 CPU tensors the same
-computation runs by default in a native build (``pathrl/limits/native/valid_range.c``, one element at
+computation runs by default in a native build (``pathrl/native/valid_range.c``, one element at
 a time, no per-op dispatch; ``tests/test_limits_native.py`` checks it against this code to 1e-9 of the
-acceleration limit): :func:`set_native` switches it off.
+acceleration limit): ``pathrl.native.set_enabled(False)`` switches it off.
 """
 
 from __future__ import annotations
@@ -40,7 +40,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from pathrl.limits import native
+from pathrl import native
 from pathrl.limits._braking import Side, greedy_bound, in_step_bound, pick, reach_top
 from pathrl.limits._knot import knot_stop_bound
 from pathrl.limits._velocity import velocity_bound, velocity_emergency, velocity_floor
@@ -158,27 +158,13 @@ def _valid_range(p: Tensor, v: Tensor, a: Tensor, limits: JointLimits, dt: float
     result then equals klimits with ``set_velocity_after_max_pos_to_zero=False``; tests only, it is not
     safe in general).
 
-    Runs the native build (:mod:`pathrl.limits.native`) for float64 CPU tensors while it is switched on
-    (:func:`set_native`, default on where a C compiler is found), else the torch code below.
+    Runs the native build (:mod:`pathrl.native`) for float64 CPU tensors while it is switched on
+    (``native.set_enabled``, default on where a C compiler is found), else the torch code below.
     """
-    if _native_on and native.applies(p, v, a, limits.pos) and native.available():
+    if native.applies(p, v, a, limits.pos):
         return native.valid_range(p, v, a, limits.pos, limits.vel, limits.acc, limits.jerk,
                                   _reach_radius(limits, dt), dt, stop_at_knot)
     return _valid_range_torch(p, v, a, limits, dt, stop_at_knot)
-
-
-_native_on = True
-
-
-def set_native(enabled: bool) -> None:
-    """Use the native valid-range code where it applies (True, default) or always the torch code."""
-    global _native_on
-    _native_on = bool(enabled)
-
-
-def native_on() -> bool:
-    """Whether the native valid-range code is switched on for this process (and built)."""
-    return _native_on and native.available()
 
 
 def _valid_range_torch(p: Tensor, v: Tensor, a: Tensor, limits: JointLimits, dt: float,

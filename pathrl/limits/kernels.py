@@ -6,7 +6,7 @@ to a few thousand elements. In eager mode the per-op dispatch dominates (measure
 maps; when compilation is on, each is compiled once (inductor, dynamic shapes, C++ compiler needed)
 and fused into one loop. Data-dependent control flow (which elements need work, iteration counts)
 stays in eager code around them. Results agree with eager mode to rounding (~1e-16 relative).
-On float64 CPU tensors the valid range itself runs natively by default (:mod:`pathrl.limits.native`);
+On float64 CPU tensors the valid range itself runs natively by default (:mod:`pathrl.native`);
 these kernels then serve the env's fused step and observation, and the torch reference (GPU, tests).
 
 The first compilation of all kernels takes minutes on a 2-core CPU; inductor caches the result on

@@ -124,7 +124,7 @@ def _table_ix(results: dict[str, Any], paper: dict[str, Any]) -> tuple[list[str]
              "range and state of the next decision; *with simulation* adds the 24 PyBullet steps per decision "
              "(iiwa7: plate and ball; ARMAR-4: free-standing; ARMAR-6: fixed base). The paper's figure includes "
              "its simulation (i7-8700K). The valid range runs as in training and evaluation: natively "
-             "(`pathrl/limits/native`) where it is built, else as compiled torch kernels (`limits` in each raw "
+             "(`pathrl/native`) where it is built, else as compiled torch kernels (`limits` in each raw "
              "result); the timed pass repeats an untimed one over the same episodes.", "",
              "| row | policy + limits (%) | with simulation (%) | decision mean / max (ms) | episodes |",
              "|---|---|---|---|---|"]
