@@ -29,17 +29,22 @@ int pathrl_advance(const double *pos, const double *vel, const double *acc, cons
             p1_out[r * dof + d] = p0[d] + v0[d] * dt + (a0[d] / 3.0 + a_end[d] / 6.0) * dt * dt;
             v1_out[r * dof + d] = v0[d] + 0.5 * (a0[d] + a_end[d]) * dt;
         }
-        double prev[MAX_PATH_JOINTS], q[MAX_PATH_JOINTS];
-        for (int64_t j = 0; j < m; j++) prev[j] = p0[path_index[j]];
+        double prev[MAX_PATH_JOINTS], q[MAX_PATH_JOINTS], half_a[MAX_PATH_JOINTS], jerk[MAX_PATH_JOINTS];
+        for (int64_t j = 0; j < m; j++) {
+            int64_t d = path_index[j];
+            prev[j] = p0[d];
+            half_a[j] = 0.5 * a0[d];
+            jerk[j] = (a_end[d] - a0[d]) / dt;
+        }
         const double *rows = table + path[r] * n_s * m;
         double last = length[path[r]] / table_step;
         double cum = 0.0, dev_max = -INFINITY, dev_sum = 0.0, dev_weighted = 0.0;
         for (int64_t k = 0; k < substeps; k++) {
             double tk = t[k], seg = 0.0;
+            double t2 = tk * tk, t3 = tk * tk * tk;
             for (int64_t j = 0; j < m; j++) {
                 int64_t d = path_index[j];
-                double jerk = (a_end[d] - a0[d]) / dt;
-                q[j] = p0[d] + v0[d] * tk + 0.5 * a0[d] * (tk * tk) + jerk * (tk * tk * tk) / 6.0;
+                q[j] = p0[d] + v0[d] * tk + half_a[j] * t2 + jerk[j] * t3 / 6.0;
                 double dq = q[j] - prev[j];
                 seg += dq * dq;
                 prev[j] = q[j];
