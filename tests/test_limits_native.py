@@ -58,16 +58,16 @@ def test_native_equals_torch_along_rollouts(robot: str) -> None:
     """States of limit-seeking rollouts (each driven by the torch ranges, so both see the same states)."""
     lim = _SHIPPED[ROBOTS.index(robot)]
     g = torch.Generator().manual_seed(5)
-    n = 128
+    n, steps = 96, 100
     p = lim.pos[:, 0] + (lim.pos[:, 1] - lim.pos[:, 0]) * torch.rand(n, lim.dof, generator=g, dtype=torch.float64)
     v, a, held = torch.zeros_like(p), torch.zeros_like(p), torch.zeros_like(p)
     compared = 0
-    for k in range(150):
+    for k in range(steps):
         compared += _agree(p, v, a, lim, stop_at_knot=True)
         lo, hi, _ = feasible._valid_range_torch(p, v, a, lim, DT, True)
         a1 = action_to_acceleration(_actions(k, held, g), lo, hi)
         (p, v), a = end_of_step(p, v, a, a1, DT), a1
-    assert compared == 150 * n * lim.dof
+    assert compared == steps * n * lim.dof
 
 
 def test_threads_split_rows_without_changing_results() -> None:
