@@ -98,7 +98,10 @@ def test_inputs_it_cannot_take_use_the_torch_code() -> None:
     p = torch.zeros(3, lim.dof, dtype=torch.float64)
     assert native.applies(p, lim.pos)
     assert not native.applies(p.float(), lim.pos)
+    assert not native.applies(p.long(), lim.pos)  # never read as doubles
     assert not native.applies(p.clone().requires_grad_(), lim.pos)
+    assert native.applies(p, longs=(torch.zeros(3, dtype=torch.long),))
+    assert not native.applies(p, longs=(torch.zeros(3, dtype=torch.int32),))
     native.set_enabled(False)
     try:
         assert not native.enabled()
@@ -124,13 +127,13 @@ def _probe(env: dict) -> subprocess.CompletedProcess:
 
 
 def test_switch_off_and_missing_compiler_fall_back_to_torch(tmp_path) -> None:
-    off = _probe({"PATHRL_NATIVE_LIMITS": "0"})
+    off = _probe({"PATHRL_NATIVE": "0"})
     assert off.returncode == 0, off.stderr
     assert off.stdout.split()[0] == "torch" and "unavailable" not in off.stderr
     broken = _probe({"PATHRL_CACHE_DIR": str(tmp_path / "cache"), "CC": "false"})
     assert broken.returncode == 0, broken.stderr
     assert broken.stdout.split()[0] == "torch"
-    assert "native limit code unavailable" in broken.stderr
+    assert "native code unavailable" in broken.stderr
     assert off.stdout.split()[1] == broken.stdout.split()[1]  # the same range either way
     built = _probe({"PATHRL_CACHE_DIR": str(tmp_path / "cache2")})
     assert built.returncode == 0 and built.stdout.split() == ["native", off.stdout.split()[1]], built.stderr
@@ -153,7 +156,7 @@ def test_native_env_step_equals_torch() -> None:
     end_s = torch.minimum(s + 0.3 * torch.rand(n, generator=g, dtype=torch.float64), paths.length[path])
     args = (pos, vel, acc, a1, torch.tensor([0, 2, 3]), s, end_s, path, paths.table, paths.length,
             torch.tensor([1.0, 2.0, 0.5], dtype=torch.float64))
-    assert native.applies(*args)
+    assert native.applies(*args[:4], *args[5:7], *args[8:], longs=(args[4], args[7]))
     ref = advance(*args, 0.1, 8, paths.table_step)
     got = native.advance(*args, 0.1, 8, paths.table_step)
     assert bool((got[2][:8] == 0).all()) and bool((got[2][8:] > 0).all())

@@ -412,10 +412,12 @@ class PathTrackingEnv(_VecEnvBase):
             a1 = torch.where(self.braking.unsqueeze(1), brake, a1)
 
         # 2.-4. integrate, progress along the path, deviation (one fused kernel)
-        args = (self.pos, self.vel, self.acc, a1, self.path_index, self.s, self.end_s, self.seg_path,
-                self.paths.table, self.paths.length, self.dev_weights)
-        step_kernel = native.advance if native.applies(*args) else advance  # same results (tests)
-        p1, v1, moved, dev_max, dev_mean = step_kernel(*args, cfg.dt, cfg.substeps, self.paths.table_step)
+        table, length = self.paths.table, self.paths.length
+        native_step = native.applies(self.pos, self.vel, self.acc, a1, self.s, self.end_s, table, length,
+                                     self.dev_weights, longs=(self.path_index, self.seg_path))
+        p1, v1, moved, dev_max, dev_mean = (native.advance if native_step else advance)(  # same results (tests)
+            self.pos, self.vel, self.acc, a1, self.path_index, self.s, self.end_s, self.seg_path, table, length,
+            self.dev_weights, cfg.dt, cfg.substeps, self.paths.table_step)
         moving = moved > 1e-12
 
         # 5. feedback, reward

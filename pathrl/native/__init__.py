@@ -9,7 +9,7 @@ The torch code is the reference (and runs on any device); the tests compare both
 compiled on first use with the system C compiler (``$CC``, default ``cc``; no torch headers, about a
 second) into one library in ``$PATHRL_CACHE_DIR`` (default ``~/.cache/pathrl``), named by the hash of the
 sources, so an edited source is rebuilt and a stale library is never loaded. No compiler: the torch code
-runs instead (:func:`available` is False; one warning). ``PATHRL_NATIVE_LIMITS=0`` or
+runs instead (:func:`available` is False; one warning). ``PATHRL_NATIVE=0`` or
 :func:`set_enabled` switch the native code off.
 
 Rows are split over :func:`threads` threads (torch's count unless set); ctypes releases the GIL during a call.
@@ -57,7 +57,7 @@ def _build(sources: tuple[Path, ...], target: Path) -> None:
 @functools.cache
 def _library() -> ctypes.CDLL | None:
     """The loaded library, built first if needed; None where it cannot be built (warned once)."""
-    if os.environ.get("PATHRL_NATIVE_LIMITS", "1") == "0":
+    if os.environ.get("PATHRL_NATIVE", "1") == "0":
         return None
     digest = hashlib.sha256(b"".join(f.read_bytes() for f in SOURCES) + " ".join(FLAGS).encode()).hexdigest()[:16]
     target = _cache_dir() / f"pathrl_native_{digest}.so"
@@ -68,7 +68,7 @@ def _library() -> ctypes.CDLL | None:
     except (OSError, subprocess.CalledProcessError) as err:
         failed_build = isinstance(err, subprocess.CalledProcessError) and err.stderr
         detail = err.stderr.strip().splitlines()[-1] if failed_build else err
-        warnings.warn(f"pathrl: native limit code unavailable ({detail}); using the torch code", stacklevel=2)
+        warnings.warn(f"pathrl: native code unavailable ({detail}); using the torch code", stacklevel=2)
         return None
     dptr, i64 = ctypes.POINTER(ctypes.c_double), ctypes.c_int64
     lib.pathrl_valid_range.argtypes = [dptr, dptr, dptr, i64, i64, i64, dptr, dptr, dptr, dptr, dptr,
@@ -91,7 +91,7 @@ def set_enabled(enabled: bool) -> None:
 
 
 def available() -> bool:
-    """Whether the native library is built and loadable (``PATHRL_NATIVE_LIMITS=0`` makes it unavailable)."""
+    """Whether the native library is built and loadable (``PATHRL_NATIVE=0`` makes it unavailable)."""
     return _library() is not None
 
 
@@ -100,16 +100,19 @@ def enabled() -> bool:
     return _enabled and available()
 
 
-def applies(*tensors: Tensor) -> bool:
-    """Whether the native code is on and can take these inputs: float64 (long for indices) CPU tensors
-    without autograd."""
-    return _enabled and all(t.dtype in (torch.float64, torch.int64) and t.device.type == "cpu"
-                            and not t.requires_grad for t in tensors) and available()
+def applies(*floats: Tensor, longs: tuple[Tensor, ...] = ()) -> bool:
+    """Whether the native code is on and can take these inputs: `floats` float64 and `longs` int64 CPU
+    tensors, none requiring grad."""
+    def fits(t: Tensor, dtype: torch.dtype) -> bool:
+        return t.dtype == dtype and t.device.type == "cpu" and not t.requires_grad
+
+    return (_enabled and all(fits(t, torch.float64) for t in floats) and all(fits(t, torch.int64) for t in longs)
+            and available())
 
 
 @functools.cache
 def _pool(workers: int) -> ThreadPoolExecutor:
-    return ThreadPoolExecutor(max_workers=workers, thread_name_prefix="pathrl-limits")
+    return ThreadPoolExecutor(max_workers=workers, thread_name_prefix="pathrl-native")
 
 
 def _ptr(t: Tensor, kind=ctypes.c_double):
@@ -122,7 +125,7 @@ def valid_range(p: Tensor, v: Tensor, a: Tensor, pos: Tensor, vel: Tensor, acc: 
     ``radius`` (D,) the reach radius. Returns ``(lo, hi, overlap)`` shaped like ``p``."""
     lib = _library()
     if lib is None:
-        raise RuntimeError("native limit code unavailable")
+        raise RuntimeError("native code unavailable")
     dof = int(vel.shape[0])
     p, v, a = (t.contiguous() for t in (p, v, a))
     lims = [t.contiguous() for t in (pos, vel, acc, jerk, radius)]
