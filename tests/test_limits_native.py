@@ -164,3 +164,13 @@ def test_native_env_step_equals_torch() -> None:
         torch.testing.assert_close(c, r, rtol=1e-12, atol=1e-14)
     with pytest.raises(ValueError, match="unsupported sizes"):
         native.advance(*args, 0.1, 100, paths.table_step)
+
+
+def test_float32_limits_use_the_torch_code() -> None:
+    """Limits built by hand in float32 must not be read as doubles by the native code."""
+    lim = _SHIPPED[0]
+    lim32 = feasible.JointLimits(*(t.float() for t in (lim.pos, lim.vel, lim.acc, lim.jerk)))
+    p = torch.zeros(2, lim.dof, dtype=torch.float64)
+    assert not native.applies(p, p, p, lim32.pos, lim32.vel, lim32.acc, lim32.jerk)
+    lo, hi = feasible.valid_acceleration_range(p, p, p, lim32, DT)  # torch code, no garbage
+    assert bool((hi > 0).all()) and bool((lo < 0).all()) and bool((hi <= lim.acc.float() + 1e-4).all())

@@ -161,7 +161,7 @@ def _valid_range(p: Tensor, v: Tensor, a: Tensor, limits: JointLimits, dt: float
     Runs the native build (:mod:`pathrl.native`) for float64 CPU tensors while it is switched on
     (``native.set_enabled``, default on where a C compiler is found), else the torch code below.
     """
-    if native.applies(p, v, a, limits.pos):
+    if native.applies(p, v, a, limits.pos, limits.vel, limits.acc, limits.jerk):
         return native.valid_range(p, v, a, limits.pos, limits.vel, limits.acc, limits.jerk,
                                   _reach_radius(limits, dt), dt, stop_at_knot)
     return _valid_range_torch(p, v, a, limits, dt, stop_at_knot)
