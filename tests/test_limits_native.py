@@ -174,3 +174,23 @@ def test_float32_limits_use_the_torch_code() -> None:
     assert not native.applies(p, p, p, lim32.pos, lim32.vel, lim32.acc, lim32.jerk)
     lo, hi = feasible.valid_acceleration_range(p, p, p, lim32, DT)  # torch code, no garbage
     assert bool((hi > 0).all()) and bool((lo < 0).all()) and bool((hi <= lim.acc.float() + 1e-4).all())
+
+
+def test_env_with_more_substeps_than_the_native_step_takes_uses_torch(tiny_dataset) -> None:
+    """substeps > 64 is a valid config: the env steps with the torch kernel instead of failing."""
+    from pathrl.dataset.io import load_pathset
+    from pathrl.envs.rewards import build_reward_terms
+    from pathrl.envs.tracking import PathTrackingEnv, TrackingEnvCfg
+    from pathrl.paths.knots import KnotStrategy
+    from pathrl.robot.model import load_robot_by_name
+
+    robot = load_robot_by_name("iiwa7")
+    paths = load_pathset(tiny_dataset, "train", KnotStrategy("distance", 0.3), robot=robot)
+    terms = build_reward_terms({"path_length": {"weight": 1.0}})
+    assert not native.advance_supports(7, 80, 100)
+    moved = []
+    for substeps in (64, 80):
+        env = PathTrackingEnv(TrackingEnvCfg(num_envs=4, seed=0, substeps=substeps), robot, paths, terms)
+        env.step(torch.full((4, 7), 0.5))
+        moved.append(env.last_step["moved"])
+    torch.testing.assert_close(moved[1], moved[0], rtol=1e-3, atol=1e-9)  # finer polyline, same motion

@@ -414,7 +414,8 @@ class PathTrackingEnv(_VecEnvBase):
         # 2.-4. integrate, progress along the path, deviation (one fused kernel)
         table, length = self.paths.table, self.paths.length
         native_step = native.applies(self.pos, self.vel, self.acc, a1, self.s, self.end_s, table, length,
-                                     self.dev_weights, longs=(self.path_index, self.seg_path))
+                                     self.dev_weights, longs=(self.path_index, self.seg_path)) \
+            and native.advance_supports(len(self.path_index), cfg.substeps, table.shape[1])
         p1, v1, moved, dev_max, dev_mean = (native.advance if native_step else advance)(  # same results (tests)
             self.pos, self.vel, self.acc, a1, self.path_index, self.s, self.end_s, self.seg_path, table, length,
             self.dev_weights, cfg.dt, cfg.substeps, self.paths.table_step)

@@ -172,6 +172,14 @@ def _over_rows(fn, rows: int, head: tuple, tail: tuple) -> list:
     return [first, *(f.result() for f in futures)]
 
 
+MAX_PATH_JOINTS = MAX_SUBSTEPS = 64  # advance.c's stack arrays
+
+
+def advance_supports(path_joints: int, substeps: int, table_samples: int) -> bool:
+    """Whether :func:`advance` takes these sizes (else the torch kernel must run)."""
+    return path_joints <= MAX_PATH_JOINTS and 1 <= substeps <= MAX_SUBSTEPS and table_samples >= 2
+
+
 def advance(pos: Tensor, vel: Tensor, acc: Tensor, a1: Tensor, path_index: Tensor, s: Tensor, end_s: Tensor,
             path: Tensor, table: Tensor, length: Tensor, dev_weights: Tensor, dt: float, substeps: int,
             table_step: float) -> tuple[Tensor, Tensor, Tensor, Tensor, Tensor]:
@@ -179,6 +187,9 @@ def advance(pos: Tensor, vel: Tensor, acc: Tensor, a1: Tensor, path_index: Tenso
     lib = _library()
     if lib is None:
         raise RuntimeError("native code unavailable")
+    if not advance_supports(int(path_index.numel()), int(substeps), int(table.shape[1])):
+        raise ValueError(f"native advance: unsupported sizes (path joints {path_index.numel()} <= 64, "
+                         f"substeps {substeps} in 1..64, table samples {table.shape[1]} >= 2)")
     pos, vel, acc, a1, s, end_s, table, length, dev_weights = (
         t.contiguous() for t in (pos, vel, acc, a1, s, end_s, table, length, dev_weights))
     path_index, path = path_index.contiguous(), path.contiguous()
@@ -190,7 +201,6 @@ def advance(pos: Tensor, vel: Tensor, acc: Tensor, a1: Tensor, path_index: Tenso
     tail = (dof, _ptr(path_index, lp), int(path_index.numel()), _ptr(s), _ptr(end_s), _ptr(path, lp), _ptr(table),
             int(table.shape[1]), _ptr(length), _ptr(dev_weights), float(dt), int(substeps), float(table_step),
             _ptr(p1), _ptr(v1), _ptr(moved), _ptr(dev_max), _ptr(dev_mean))
-    if any(_over_rows(lib.pathrl_advance, n, head, tail)):
-        raise ValueError(f"native advance: unsupported sizes (path joints {path_index.numel()} <= 64, "
-                         f"substeps {substeps} in 1..64, table samples {table.shape[1]} >= 2)")
+    if any(_over_rows(lib.pathrl_advance, n, head, tail)):  # advance.c checks the sizes itself too
+        raise RuntimeError("native advance rejected sizes that advance_supports accepted")
     return p1, v1, moved, dev_max, dev_mean
