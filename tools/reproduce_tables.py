@@ -37,7 +37,16 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 from pathrl.repro.figures import pareto_table_ii, path_overlay  # noqa: E402
 from pathrl.repro.render import render_latex, render_markdown  # noqa: E402
-from pathrl.repro.tables import REALTIME, ROWS, WARM_STARTS, Baseline, Evaluation, baselines, evaluations  # noqa: E402
+from pathrl.repro.tables import (  # noqa: E402
+    CONTROLLER_MODELS,
+    REALTIME,
+    ROWS,
+    WARM_STARTS,
+    Baseline,
+    Evaluation,
+    baselines,
+    evaluations,
+)
 
 BIN = Path(sys.executable).parent
 PAPER = yaml.safe_load((ROOT / "tools" / "paper_tables.yaml").read_text())
@@ -143,7 +152,7 @@ def build_plan(args: argparse.Namespace, profile: Profile, lay: Layout) -> Plan:
                      f"dataset.path={dest}", "overwrite=true"], logs / f"dataset_{robot}_{name}.log"))
         trained = {}
         for e in evals:
-            if e.generalization:
+            if e.generalization or e.model in CONTROLLER_MODELS:  # controllers are not trained
                 continue
             trained.setdefault(e.model, e)
         for model, e in trained.items():
@@ -191,7 +200,16 @@ def train_and_ship(model: str, e: Evaluation, profile: Profile, lay: Layout, log
 def shipped(e: Evaluation, lay: Layout) -> bool:
     """Whether the policy of ``e`` is shipped (rows of policies that are not show a dash)."""
     model = lay.models / e.model
-    return (model / "model.pt").is_file() or any(model.glob("model_*.pt"))
+    return (model / "model.pt").is_file() or any(model.glob("model_*.pt")) or _is_controller(model)
+
+
+def _is_controller(model: Path) -> bool:
+    """A model-based controller's directory (``controller:`` in its config.yaml): evaluated, never trained."""
+    cfg = model / "config.yaml"
+    if not cfg.is_file():
+        return False
+    data = yaml.safe_load(cfg.read_text())
+    return isinstance(data, dict) and "controller" in data
 
 
 def rel(path: Path) -> Path:
@@ -219,6 +237,8 @@ def evaluate(e: Evaluation, profile: Profile, lay: Layout, reuse: bool, logs: Pa
         cmd.append(f"episodes={e.episodes}")
     if e.task:
         cmd += [f"task={e.task}", "backend=pybullet"]
+    if e.open_loop:
+        cmd.append("open_loop=true")
     sh(cmd, logs / f"eval_{e.id}.log")
 
 

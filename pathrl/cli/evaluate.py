@@ -3,9 +3,12 @@
     pathrl-eval run_dir=models/iiwa7_random [dataset=NAME | dataset.path=DIR] [split=test]
                 [episodes=N] [segments=paper|full] [seed=0] [out=DIR]
                 [task=ball_on_plate|standing] [backend=pybullet|analytic] [compile_limits=true|false]
+                [open_loop=true|false]
 
 ``task`` adds a feedback task to a run trained without one (its sensor values stay unobserved); runs with
-a task are simulated with ``backend`` (default PyBullet).
+a task are simulated with ``backend`` (default PyBullet). ``open_loop=true`` freezes the task's sensor at
+its first value of each episode. ``run_dir`` may also be a model-based controller's directory
+(``models/iiwa7_ball_tray_controller``).
 """
 
 from __future__ import annotations
@@ -16,9 +19,9 @@ from pathrl.cli.common import UserError, run_cli
 
 USAGE = ("usage: pathrl-eval run_dir=RUN [dataset=NAME | dataset.path=DIR] [split=test] [episodes=N] "
          "[segments=paper|full] [seed=S] [out=DIR] [record=true|false] [task=ball_on_plate|standing] "
-         "[backend=pybullet|analytic] [compile_limits=true|false]")
+         "[backend=pybullet|analytic] [compile_limits=true|false] [open_loop=true|false]")
 KEYS = {"run_dir", "dataset", "dataset.path", "split", "episodes", "segments", "seed", "out", "record", "num_envs",
-        "task", "backend", "compile_limits"}
+        "task", "backend", "compile_limits", "open_loop"}
 
 
 def parse_args(argv: list[str]) -> dict[str, str]:
@@ -66,7 +69,8 @@ def _main(argv: list[str]) -> None:
         raise UserError(f"task must be ball_on_plate, standing or tracking, got {args['task']!r}")
     if args.get("backend", "pybullet") not in ("pybullet", "analytic"):
         raise UserError(f"backend must be pybullet or analytic, got {args['backend']!r}")
-    flags = {"record": _bool(args, "record", True), "compile_limits": _bool(args, "compile_limits", False)}
+    flags = {"record": _bool(args, "record", True), "compile_limits": _bool(args, "compile_limits", False),
+             "open_loop": _bool(args, "open_loop", False)}
     episodes = _int(args, "episodes", None)
     if episodes is not None and episodes < 1:
         raise UserError(f"episodes must be >= 1, got {episodes}")
@@ -83,7 +87,7 @@ def _main(argv: list[str]) -> None:
                      _int(args, "seed", 0) or 0, Path(args["out"]) if "out" in args else None,
                      num_envs=_int(args, "num_envs", 1200) or 1200,
                      record=flags["record"], task=args.get("task"), backend=args.get("backend", "pybullet"),
-                     compile_limits=flags["compile_limits"])
+                     compile_limits=flags["compile_limits"], open_loop=flags["open_loop"])
     except (RunError, DatasetError) as exc:
         raise UserError(str(exc)) from None
     _print_table(m)
@@ -99,7 +103,7 @@ def _print_table(m: dict) -> None:
     for k in ("duration_s", "joint_dev_mean_rad", "joint_dev_max_rad", "joint_dev_final_rad",
               "cart_pos_dev_mean_cm", "cart_pos_dev_max_cm", "cart_pos_dev_final_cm",
               "cart_rot_dev_mean_deg", "cart_rot_dev_max_deg", "cart_rot_dev_final_deg",
-              "terminated_early_pct", "task_failed_pct", "limit_violations"):
+              "duration_end_of_path_s", "terminated_early_pct", "task_failed_pct", "limit_violations"):
         if k not in m:
             continue
         v = m[k]

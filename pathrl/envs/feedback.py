@@ -338,3 +338,35 @@ def rolling_resistance(v: Tensor, drive: Tensor, a_res: Tensor, dt: float) -> Te
     return torch.where(resting, start * dt, rolled)
 
 
+
+
+class FrozenSensor:
+    """Open loop: a feedback source whose observation stays at its value when the episode started.
+
+    The simulation (ball, standing robot), its task values and its failure flag run as before; only what
+    the policy (or a controller) sees of the sensor is frozen. Evaluating with and without it shows how
+    much a policy relies on the feedback (TrueAdapt, Table I, does the same).
+    """
+
+    def __init__(self, inner: Feedback):
+        self.inner = inner
+        self.name, self.num_obs = inner.name, inner.num_obs
+        self.value_names, self.ok_value = inner.value_names, inner.ok_value
+        self.frozen: Tensor | None = None
+
+    def reset(self, env_ids: Tensor, q: Tensor) -> None:
+        self.inner.reset(env_ids, q)
+        now = self.inner.observe()
+        if self.frozen is None:
+            self.frozen = now.clone()
+        self.frozen[env_ids] = now[env_ids]
+
+    def step(self, q: Tensor, qd: Tensor, active: Tensor | None = None) -> FeedbackStep:
+        out = self.inner.step(q, qd, active)
+        return FeedbackStep(obs=self.observe(), values=out.values, failed=out.failed)
+
+    def observe(self) -> Tensor:
+        return self.inner.observe() if self.frozen is None else self.frozen
+
+    def close(self) -> None:
+        self.inner.close()

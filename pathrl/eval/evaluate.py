@@ -13,7 +13,9 @@ import numpy as np
 import torch
 import yaml
 
+from pathrl.baselines.ball_feedback import make_controller
 from pathrl.dataset.io import load_pathset
+from pathrl.envs.feedback import FrozenSensor
 from pathrl.envs.rewards import build_reward_terms
 from pathrl.envs.tracking import PathTrackingEnv
 from pathrl.eval.metrics import METRIC_KEYS, episode_deviations
@@ -33,8 +35,10 @@ class RunError(ValueError):
     """A run / model directory is incomplete or unreadable."""
 
 
-def load_run(run_dir: Path) -> tuple[dict[str, Any], Path, dict[str, Any]]:
-    """(resolved config, checkpoint path, training summary) of a run or model directory."""
+def load_run(run_dir: Path) -> tuple[dict[str, Any], Path | None, dict[str, Any]]:
+    """(resolved config, checkpoint path, training summary) of a run or model directory.
+
+    A model-based controller's directory (``controller:`` in its config) has no checkpoint (None)."""
     run_dir = Path(run_dir)
     if not run_dir.is_dir():
         raise RunError(f"run_dir not found: {run_dir}")
@@ -45,10 +49,12 @@ def load_run(run_dir: Path) -> tuple[dict[str, Any], Path, dict[str, Any]]:
         cfg = yaml.safe_load(cfg_path.read_text())
     except yaml.YAMLError as exc:
         raise RunError(f"{cfg_path}: invalid YAML ({str(exc).splitlines()[0]})") from None
+    if not isinstance(cfg, dict):
+        raise RunError(f"{cfg_path}: expected a mapping of config groups, got {type(cfg).__name__}")
     ckpt = run_dir / "model.pt"
     if not ckpt.is_file():
         ckpt = latest_checkpoint(run_dir)
-    if ckpt is None:
+    if ckpt is None and "controller" not in cfg:
         raise RunError(f"{run_dir}: no checkpoint (model.pt or model_<iteration>.pt)")
     summary = {}
     if (run_dir / "summary.json").is_file():
@@ -81,6 +87,7 @@ def evaluate(
     task: str | None = None,
     backend: str = "pybullet",
     compile_limits: bool = False,
+    open_loop: bool = False,
 ) -> dict[str, Any]:
     """Evaluate the policy of `run_dir` deterministically; write metrics.json (+ episodes.mcap).
 
@@ -91,6 +98,9 @@ def evaluate(
     is reported per episode (``task_failed``) and as ``task_failed_pct``. ``compile_limits``: see
     :mod:`pathrl.limits.kernels` (same results to rounding); off by default: an evaluation is a few hundred
     steps, too short to earn back the per-process tracing (iiwa7, 1200 episodes: 17 s eager, 35 s compiled).
+    ``open_loop``: the task's sensor stays at its first value of each episode (:class:`FrozenSensor`).
+    A model-based controller's directory (``controller:`` in its config,
+    :func:`pathrl.baselines.ball_feedback.make_controller`) evaluates like a policy.
     """
     torch.set_num_threads(int(os.environ.get("PATHRL_THREADS", "1")))
     cfg, ckpt, summary = load_run(run_dir)
@@ -117,13 +127,23 @@ def evaluate(
         num_envs = min(num_envs, PYBULLET_ENVS)  # one PyBullet client per env
     env_cfg = replace(env_cfg_from(cfg, num_envs=min(num_envs, episodes), seed=seed, knot_gap_norm=gap),
                       autoreset=False, device="cpu", max_deviation=None, fail_terminates=False)
+    if open_loop and not has_task:
+        raise RunError("open_loop=true: the run has no feedback task to freeze (give task=...)")
     try:
         feedback = make_feedback(cfg, robot, env_cfg.num_envs, seed, backend) if has_task else None
     except (ValueError, RuntimeError) as exc:  # task / robot mismatch, a scene that cannot be built
         raise RunError(str(exc)) from None
+    if open_loop:
+        feedback = FrozenSensor(feedback)
     try:
         env = PathTrackingEnv(env_cfg, robot, paths, build_reward_terms(cfg["reward"]["terms"]), feedback)
-        policy = load_policy(cfg, env, ckpt)
+        if "controller" in cfg:
+            try:
+                policy = make_controller(cfg["controller"], env)
+            except ValueError as exc:
+                raise RunError(f"{run_dir}: {exc}") from None
+        else:
+            policy = load_policy(cfg, env, ckpt)
         t0 = time.perf_counter()
         with kernels.use_compiled(compile_limits):
             records = _run(env, policy, plan, episodes, progress)
@@ -131,8 +151,9 @@ def evaluate(
     finally:
         if feedback is not None:
             feedback.close()
-    return _finish(records, rollout_s, env, robot, paths, ds_path, split, segments, seed, run_dir, ckpt, out_dir,
-                   record, cfg if has_task else None)
+    metrics = _finish(records, rollout_s, env, robot, paths, ds_path, split, segments, seed, run_dir, ckpt, out_dir,
+                      record, cfg if has_task else None, open_loop)
+    return metrics
 
 
 #: Name of the failure share in the paper's tables, per feedback task.
@@ -151,7 +172,7 @@ def _run(env: PathTrackingEnv, policy, plan, episodes: int, progress: bool) -> l
 
 
 def _finish(records, rollout_s, env, robot, paths, ds_path, split, segments, seed, run_dir, ckpt, out_dir, record,
-            task_run_cfg) -> dict[str, Any]:
+            task_run_cfg, open_loop: bool = False) -> dict[str, Any]:
     """Per-episode and aggregate metrics of the rollouts; writes metrics.json (+ episodes.mcap)."""
     t0 = time.perf_counter()
     fk = ForwardKinematics(robot)
@@ -162,13 +183,14 @@ def _finish(records, rollout_s, env, robot, paths, ds_path, split, segments, see
     metrics = _aggregate(per_episode, robot, ds_path, split, segments, seed)
     if task_run_cfg is not None:
         t = task_cfg(task_run_cfg)
-        metrics["task"] = {"name": t["name"], "backend": type(env.feedback).__name__, "observed": t["observe"]}
+        backend = type(getattr(env.feedback, "inner", env.feedback)).__name__
+        metrics["task"] = {"name": t["name"], "backend": backend, "observed": t["observe"], "open_loop": open_loop}
         metrics["task_failed_pct"] = 100.0 * float(np.mean([p["task_failed"] for p in per_episode]))
         metrics[FAILURE_METRIC[t["feedback"]]] = metrics["task_failed_pct"]
     metrics["eval_wall_time_s"] = time.perf_counter() - t0 + rollout_s
     metrics["rollout_wall_time_s"] = rollout_s
     metrics["run_dir"] = str(run_dir)
-    metrics["checkpoint"] = ckpt.name
+    metrics["checkpoint"] = ckpt.name if ckpt is not None else None
     out = Path(out_dir) if out_dir else Path(run_dir)
     out.mkdir(parents=True, exist_ok=True)
     if record:

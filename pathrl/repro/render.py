@@ -163,6 +163,8 @@ def _training(results: dict[str, Any]) -> list[str]:
              "authors: env steps (M) / wall time (h) |",
              "|---|---|---|---|---|---|---|"]
     for model, sm in budgets.items():
+        if sm.get("controller"):  # a model-based controller: nothing trained
+            continue
         steps = sm.get("env_steps")
         wall = sm.get("wall_time_s")
         lines.append(f"| {model} | {sm.get('iterations', '–')} | {_fmt(None if steps is None else steps / 1e6, 1)} | "

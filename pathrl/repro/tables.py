@@ -25,11 +25,13 @@ class Evaluation:
     generalization: bool = False  # evaluated on another dataset than the one it was trained on
     task: str | None = None  # evaluated with this feedback task in PyBullet (e.g. ball_on_plate)
     episodes: int | None = None  # default: 1200 paper segments, or every path once for segments=full
+    open_loop: bool = False  # the task's sensor frozen at its first value (does the policy use the feedback?)
 
     @property
     def id(self) -> str:
         base = f"{self.model}_on_{self.dataset}" if self.generalization else self.model
-        return f"{base}_in_pybullet" if self.task else base
+        base = f"{base}_in_pybullet" if self.task else base
+        return f"{base}_open_loop" if self.open_loop else base
 
     @property
     def data_robot(self) -> str:
@@ -73,8 +75,14 @@ class Row:
 
 
 def _e(model: str, robot: str, dataset: str, knots: str = "curvature_9", segments: str = "paper",
-       generalization: bool = False, task: str | None = None, episodes: int | None = None) -> Evaluation:
-    return Evaluation(model, robot, dataset, knots, segments, generalization, task, episodes)
+       generalization: bool = False, task: str | None = None, episodes: int | None = None,
+       open_loop: bool = False) -> Evaluation:
+    return Evaluation(model, robot, dataset, knots, segments, generalization, task, episodes, open_loop)
+
+
+def _ball(model: str, open_loop: bool = False) -> Evaluation:
+    """`model` on the whole ball-balancing test paths in PyBullet."""
+    return _e(model, "iiwa7", "ball_balancing", "distance_5", "full", task="ball_on_plate", open_loop=open_loop)
 
 
 IIWA_RANDOM = _e("iiwa7_random", "iiwa7", "random")
@@ -110,10 +118,13 @@ ROWS: tuple[Row, ...] = (
     Row(TABLE_IV, "iiwa7", _e("iiwa7_random", "iiwa7", "target_point", generalization=True)),
     Row(TABLE_IV, "armar4_fixed", _e("armar4_random", "armar4", "target_point", generalization=True)),
     # the tracking policy with the ball riding along unobserved; the policy trained with ball feedback
-    Row(TABLE_VII, "no_balancing_reward", _e("iiwa7_ball_balancing", "iiwa7", "ball_balancing", "distance_5", "full",
-                                             task="ball_on_plate")),
-    Row(TABLE_VII, "balancing_reward", _e("iiwa7_ball_balancing_reward", "iiwa7", "ball_balancing", "distance_5",
-                                          "full", task="ball_on_plate")),
+    Row(TABLE_VII, "no_balancing_reward", _ball("iiwa7_ball_balancing")),
+    Row(TABLE_VII, "balancing_reward", _ball("iiwa7_ball_balancing_reward")),
+    # not in the paper: the same policy with the ball sensor frozen (open loop), and the model-based controller
+    # (pathrl.baselines.ball_feedback, no learning) closed and open loop
+    Row(TABLE_VII, "balancing_reward/open_loop", _ball("iiwa7_ball_balancing_reward", open_loop=True)),
+    Row(TABLE_VII, "model_based_feedback", _ball("iiwa7_ball_tray_controller")),
+    Row(TABLE_VII, "model_based_feedback/open_loop", _ball("iiwa7_ball_tray_controller", open_loop=True)),
     # free-standing ARMAR-4 in PyBullet, 200 paper segments each (a PyBullet episode costs ~1 s of CPU)
     Row(TABLE_VIII, "fixed_legs/no_balancing_reward", _e("armar4_target_point", "armar4", "target_point",
                                                          task="standing", episodes=200)),
@@ -122,6 +133,14 @@ ROWS: tuple[Row, ...] = (
     Row(TABLE_VIII, "controlled_legs/balancing_reward", _e("armar4_legs_target_point_balancing", "armar4_legs",
                                                            "target_point", task="standing", episodes=200)),
 )
+
+
+#: Rows of ours that the paper does not have (shown with a dash for the paper's value).
+NOT_IN_PAPER = frozenset({(TABLE_VII, "balancing_reward/open_loop"), (TABLE_VII, "model_based_feedback"),
+                          (TABLE_VII, "model_based_feedback/open_loop")})
+
+#: Model directories that hold a model-based controller (``controller:`` in config.yaml): evaluated, not trained.
+CONTROLLER_MODELS = frozenset({"iiwa7_ball_tray_controller"})
 
 
 #: Rows trained from another row's policy (conf/experiment/<model>.yaml: init_from: models/<source>).
