@@ -114,7 +114,7 @@ def test_ball_task_warm_start_train_and_pybullet_eval(tiny_dataset, tmp_path):
     m = json.loads((out / "metrics.json").read_text())
     task_msgs = [msg for t, _, msg in read_messages(out / "episodes.mcap") if t == "/eval/task"]
     assert task_msgs and {"episode", "t", "ball_dist", "ball_on_plate"} <= set(task_msgs[0])
-    assert m["task"] == {"name": "ball_on_plate", "backend": "PyBulletBall", "observed": True}
+    assert m["task"] == {"name": "ball_on_plate", "backend": "PyBulletBall", "observed": True, "open_loop": False}
     assert 0.0 <= m["task_failed_pct"] <= 100.0 and len(m["per_episode"]) == 2
     # the tracking run evaluated with the ball riding along unobserved
     r = run([str(BIN / "pathrl-eval"), f"run_dir={src}", "compile_limits=false",
