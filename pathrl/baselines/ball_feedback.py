@@ -2,20 +2,24 @@
 
 Per env and decision step (batched, float64; every tensor is (N, ...)):
 
-1. **Time law.** The path segment is followed with a rest-to-rest minimum-jerk time law
-   ``s(t) = s0 + L (10 u^3 - 15 u^4 + 6 u^5)``, ``u = t / T``. The duration T of each episode is the
-   smallest that keeps the plan's joint velocity, acceleration and jerk within ``limit_margin`` of the
-   limits and the plate's peak acceleration below ``plate_acc`` (m/s^2), never below ``min_duration``.
+1. **Time law.** The path segment is followed with a minimum-jerk time law to rest at the segment end. Its
+   duration T is the smallest that keeps the plan's joint velocity, acceleration and jerk within
+   ``limit_margin`` of the limits and the plate's peak acceleration and jerk below ``plate_acc`` (m/s^2) and
+   ``plate_jerk`` (m/s^3), never below ``min_duration``. Every step the law is re-planned as a quintic from
+   the arc length the env has counted (with the previous plan's path velocity and acceleration) to the end
+   at T: the env counts the joint-space length moved, tilting included, so a plan in path arc length alone
+   would see the env declare the end reached early and brake hard.
 2. **Tray tilt (feed-forward).** At the end of the next step the plate's normal should point along
    ``a_p - g + (7/5) u``: ``a_p`` the plate's planned acceleration (second difference of the planned plate
-   centres ``+-smooth_s`` apart), ``u`` the ball's desired acceleration on the plate. With ``u = 0`` the
-   in-plane specific force vanishes and a ball rolling without slip stays where it is (5/7 of the in-plane
-   specific force accelerates it, :class:`pathrl.envs.feedback.AnalyticBall`).
+   centres ``+-smooth_s`` apart), ``u`` the ball's desired acceleration on the plate; the plate turns about
+   the ball (``pivot``). With ``u = 0`` the in-plane specific force vanishes and a ball rolling without slip
+   stays where it is (5/7 of the in-plane specific force accelerates it,
+   :class:`pathrl.envs.feedback.AnalyticBall`).
 3. **Ball feedback.** ``u = -kp x_hat - kd v_hat`` (plate frame, clipped to ``max_ball_acc``), from the
    ball position the policy observes (previous and current, 0.1 s apart): ``v_hat`` their difference,
    ``x_hat`` the position extrapolated ``lead_s`` ahead.
 4. **Joint target.** One damped least-squares step from the planned configuration (plus last step's
-   correction) puts the plate centre on the planned one and its normal along the desired one (the turn
+   correction) keeps the pivot where the plan has it and turns the normal to the desired one (the turn
    about the normal is left free; Jacobian by finite differences).
 5. **Tracking.** The end-of-step acceleration follows an implicit PD law on the end-of-step state,
    ``a1 = a_d + kq (q_d - q1(a1)) + kv (v_d - v1(a1))`` (natural frequency ``track_omega``, critically
@@ -64,12 +68,10 @@ class TrayControllerCfg:
     fd_step: float = 1e-6  # rad, finite-difference step of the Jacobian
 
 
-def min_jerk(u: Tensor) -> tuple[Tensor, Tensor, Tensor, Tensor]:
-    """Rest-to-rest minimum-jerk law at normalized time u (clamped to [0, 1]): position, and its first three
-    derivatives with respect to u; each shaped like u."""
+def min_jerk(u: Tensor) -> Tensor:
+    """Rest-to-rest minimum-jerk law (normalized position) at normalized time u (clamped to [0, 1])."""
     u = u.clamp(0.0, 1.0)
-    return (10 * u**3 - 15 * u**4 + 6 * u**5, 30 * u**2 - 60 * u**3 + 30 * u**4,
-            60 * u - 180 * u**2 + 120 * u**3, 60 - 360 * u + 360 * u**2)
+    return 10 * u**3 - 15 * u**4 + 6 * u**5
 
 
 def quintic_coefficients(p0: Tensor, v0: Tensor, a0: Tensor, p1: Tensor, tau: Tensor) -> Tensor:
@@ -101,7 +103,7 @@ def plan_durations(env: PathTrackingEnv, env_ids: Tensor, cfg: TrayControllerCfg
     path, s0, s1 = env.seg_path[env_ids], env.start_s[env_ids], env.end_s[env_ids]
     h = 1.0 / samples
     u = torch.linspace(-2 * h, 1 + 2 * h, samples + 5, dtype=torch.float64, device=s0.device)  # (S,)
-    s = s0.unsqueeze(1) + (s1 - s0).unsqueeze(1) * min_jerk(u)[0].unsqueeze(0)  # (n, S)
+    s = s0.unsqueeze(1) + (s1 - s0).unsqueeze(1) * min_jerk(u).unsqueeze(0)  # (n, S)
     q = env.paths.position_at(path.repeat_interleave(len(u)), s.reshape(-1)).reshape(n, len(u), -1)
     vel = (q[:, 2:] - q[:, :-2]) / (2 * h)
     acc = (q[:, 2:] - 2 * q[:, 1:-1] + q[:, :-2]) / h**2
@@ -162,7 +164,7 @@ class TrayController:
         env = self.env
         shape = t.shape
         view = (-1, *([1] * (t.dim() - 1)))
-        s = quintic(self.coef.view(*view[:1], *([1] * (t.dim() - 1)), 6),
+        s = quintic(self.coef.view(*view, 6),
                     (t - self.t_plan.view(view)).clamp(min=0.0).minimum(self.tau.view(view)))[0]
         s = torch.minimum(s, env.end_s.view(view))
         path = env.seg_path.view(view).expand(shape)
@@ -178,7 +180,7 @@ class TrayController:
             ids = new.nonzero().squeeze(1)
             self.duration[ids] = plan_durations(env, ids, self.cfg, self.fk)
             self.correction[ids] = 0.0
-        _, v0, a0 = quintic(self.coef, (now - self.t_plan).clamp(min=0.0).minimum(self.tau))[:3]
+        _, v0, a0 = quintic(self.coef, (now - self.t_plan).clamp(min=0.0).minimum(self.tau))
         v0 = torch.where(new, torch.zeros_like(v0), v0)
         a0 = torch.where(new, torch.zeros_like(a0), a0)
         self.tau = (self.duration - now).clamp(min=self.cfg.min_horizon)
