@@ -200,16 +200,8 @@ def train_and_ship(model: str, e: Evaluation, profile: Profile, lay: Layout, log
 def shipped(e: Evaluation, lay: Layout) -> bool:
     """Whether the policy of ``e`` is shipped (rows of policies that are not show a dash)."""
     model = lay.models / e.model
-    return (model / "model.pt").is_file() or any(model.glob("model_*.pt")) or _is_controller(model)
-
-
-def _is_controller(model: Path) -> bool:
-    """A model-based controller's directory (``controller:`` in its config.yaml): evaluated, never trained."""
-    cfg = model / "config.yaml"
-    if not cfg.is_file():
-        return False
-    data = yaml.safe_load(cfg.read_text())
-    return isinstance(data, dict) and "controller" in data
+    controller = e.model in CONTROLLER_MODELS and (model / "config.yaml").is_file()  # evaluated, never trained
+    return (model / "model.pt").is_file() or any(model.glob("model_*.pt")) or controller
 
 
 def rel(path: Path) -> Path:

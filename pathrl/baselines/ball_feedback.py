@@ -206,7 +206,7 @@ class TrayController:
         h = c.smooth_s
         offsets = torch.tensor([-h, 0.0, h], dtype=torch.float64, device=env.device)
         q3 = self._plan(t1.unsqueeze(1) + offsets)  # (N, 3, D)
-        o3, _ = plate_pose(self.fk, q3)
+        o3, r3 = plate_pose(self.fk, q3)
         a_plate = (o3[:, 2] - 2 * o3[:, 1] + o3[:, 0]) / h**2
         _, rot_now = plate_pose(self.fk, env.pos)
         u = self.ball_acceleration(ball_obs)
@@ -216,8 +216,7 @@ class TrayController:
         # pivot: the ball's centre as a point of the plate; the tilt turns the plate about it
         pivot = torch.cat([ball_obs[:, 2:4] * self.half * c.pivot,
                            torch.full_like(ball_obs[:, :1], c.ball_height)], dim=1)
-        _, r3 = plate_pose(self.fk, q_plan)
-        goal = o3[:, 1] + (r3 @ pivot.unsqueeze(2)).squeeze(2)
+        goal = o3[:, 1] + (r3[:, 1] @ pivot.unsqueeze(2)).squeeze(2)
         q_d = q_plan + self.correction
         for _ in range(int(c.ik_iters)):
             q_d = self._tilt(q_d, goal, normal, pivot)

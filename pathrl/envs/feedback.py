@@ -338,8 +338,6 @@ def rolling_resistance(v: Tensor, drive: Tensor, a_res: Tensor, dt: float) -> Te
     return torch.where(resting, start * dt, rolled)
 
 
-
-
 class FrozenSensor:
     """Open loop: a feedback source whose observation stays at its value when the episode started.
 

@@ -151,9 +151,8 @@ def evaluate(
     finally:
         if feedback is not None:
             feedback.close()
-    metrics = _finish(records, rollout_s, env, robot, paths, ds_path, split, segments, seed, run_dir, ckpt, out_dir,
-                      record, cfg if has_task else None, open_loop)
-    return metrics
+    return _finish(records, rollout_s, env, robot, paths, ds_path, split, segments, seed, run_dir, ckpt, out_dir,
+                   record, cfg if has_task else None, open_loop)
 
 
 #: Name of the failure share in the paper's tables, per feedback task.
