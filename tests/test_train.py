@@ -62,6 +62,21 @@ def test_train_resume_and_eval(tiny_dataset, tmp_path):
     topics = {t for t, _, _ in read_messages(out / "episodes.mcap")}
     assert {"/eval/robot", "/eval/reference", "/eval/joint_state", "/eval/tcp", "/eval/episode_metrics"} <= topics
 
+    # time-to-quality curve over the checkpoints of iterations 0, 2 (every 2) and the last one (3)
+    curve = tmp_path / "curve"
+    r = run([sys.executable, "tools/time_to_quality.py", "--run", str(run_dir), "--row", "iiwa7/random",
+             "--dataset", str(tiny_dataset), "--every", "2", "--episodes", "3", "--out", str(curve)])
+    assert r.returncode == 0, r.stderr[-2000:]
+    rec = json.loads((curve / "curve.json").read_text())["runs"][0]
+    assert [p["iteration"] for p in rec["points"]] == [1, 3, 4]
+    assert [p["env_steps"] for p in rec["points"]] == [256, 768, 1024]
+    walls = [p["wall_time_s"] for p in rec["points"]]
+    assert all(w > 0 for w in walls) and walls == sorted(walls)
+    assert rec["target"] == {"max_duration_s": 4.28, "max_dev_cm": 3.3} and (curve / "curve.png").is_file()
+    r = run([sys.executable, "tools/time_to_quality.py", "--run", str(run_dir), "--row", "iiwa7/nowhere",
+             "--out", str(curve)])
+    assert r.returncode == 2 and "not a Table I row" in r.stderr
+
 
 def test_run_mcap_survives_kill(tiny_dataset, tmp_path):
     run_dir = tmp_path / "killed"

@@ -134,21 +134,51 @@ def bench_reference(robot_name: str, seconds: float) -> dict:
     return {"robot": robot_name, "steps": steps, "env_steps_per_s": steps / dt}
 
 
-def bench_ppo_iteration(num_envs: int, iterations: int) -> dict:
+def bench_ppo_iteration(robot_name: str, num_envs: int, iterations: int, threads: int = 2,
+                        hidden_dtype: str = "bfloat16") -> dict:
+    """Seconds per PPO iteration of `conf/agent/ppo.yaml` (rollout + returns + update) with `threads` torch
+    threads (``pathrl-train`` runs with 2) and the models' hidden layers in `hidden_dtype`, and the share of
+    each phase: policy passes in the rollout (``act``), env steps, the update (``update``), the rest."""
     import yaml
     from rsl_rl.runners import OnPolicyRunner
 
-    robot = load_robot_by_name("iiwa7")
-    env = make_env(robot, num_envs)
     agent = yaml.safe_load((ROOT / "conf/agent/ppo.yaml").read_text())
-    runner = OnPolicyRunner(env, agent, log_dir=None, device="cpu")
-    runner.learn(3 if kernels.compiled() else 1)  # rollouts run in inference mode: kernels compile again
-    t0 = time.perf_counter()
-    runner.learn(iterations)
-    dt = (time.perf_counter() - t0) / iterations
+    for model in ("actor", "critic"):
+        agent[model]["hidden_dtype"] = hidden_dtype
+    before = torch.get_num_threads()
+    torch.set_num_threads(threads)
+    try:
+        env = make_env(load_robot_by_name(robot_name), num_envs)
+        runner = OnPolicyRunner(env, agent, log_dir=None, device="cpu")
+        runner.learn(3 if kernels.compiled() else 1)  # rollouts run in inference mode: kernels compile again
+        phases = {"act": 0.0, "env_step": 0.0, "update": 0.0}
+        _time_calls(runner.alg, "act", phases)
+        _time_calls(env, "step", phases, "env_step")
+        _time_calls(runner.alg, "update", phases)
+        t0 = time.perf_counter()
+        runner.learn(iterations)
+        dt = (time.perf_counter() - t0) / iterations
+    finally:
+        torch.set_num_threads(before)
     samples = agent["num_steps_per_env"] * num_envs
-    return {"num_envs": num_envs, "steps_per_env": agent["num_steps_per_env"], "s_per_iteration": dt,
-            "samples_per_s": samples / dt}
+    share = {k: v / iterations / dt for k, v in phases.items()}
+    share["other"] = 1.0 - sum(share.values())
+    return {"robot": robot_name, "num_envs": num_envs, "steps_per_env": agent["num_steps_per_env"],
+            "threads": threads, "hidden_dtype": hidden_dtype, "iterations": iterations, "s_per_iteration": dt,
+            "samples_per_s": samples / dt, "share": share}
+
+
+def _time_calls(obj, name: str, acc: dict[str, float], key: str | None = None) -> None:
+    """Wrap `obj.name` so that its wall time adds up in `acc[key or name]`."""
+    f = getattr(obj, name)
+
+    def timed(*args, **kwargs):
+        t0 = time.perf_counter()
+        out = f(*args, **kwargs)
+        acc[key or name] += time.perf_counter() - t0
+        return out
+
+    setattr(obj, name, timed)
 
 
 def bench_decision(robot_name: str, repeats: int = 300, mode: str = "native") -> dict:
@@ -261,7 +291,12 @@ def main() -> None:
     ref_rate = res["reference_iiwa7"]["env_steps_per_s"]
     res["batched_over_reference_iiwa7"] = res[main_key]["env_steps_per_s"] / ref_rate
     with limit_code(modes[0]):
-        res["ppo_iteration_iiwa7"] = bench_ppo_iteration(n, 1 if quick else 3)
+        its = 1 if quick else 4
+        for robot in ("iiwa7", "armar4_legs"):  # as pathrl-train runs: 2 threads, hidden layers in bfloat16
+            res[f"ppo_iteration_{robot}"] = bench_ppo_iteration(robot, n, its)
+        # float32 hidden layers, 2 threads and 1 thread: what the bfloat16 hidden layers and the threads buy
+        res["ppo_iteration_iiwa7_float32"] = bench_ppo_iteration("iiwa7", n, its, hidden_dtype="float32")
+        res["ppo_iteration_iiwa7_float32_1thread"] = bench_ppo_iteration("iiwa7", n, its, 1, "float32")
     res["physics_ball_on_plate"] = bench_physics("ball_on_plate", sec)
     res["physics_armar4_standing"] = bench_physics("armar4_standing", sec)
     with limit_code(modes[0]):
@@ -296,8 +331,12 @@ def _print(res: dict, out: Path) -> None:
                   f"{e['env_steps_per_s']:,.0f} steps/s")
     t.add_row("single-env reference iiwa7", f"{res['reference_iiwa7']['env_steps_per_s']:,.0f} steps/s")
     t.add_row("batched / reference (iiwa7)", f"{res['batched_over_reference_iiwa7']:,.0f} x")
-    p = res["ppo_iteration_iiwa7"]
-    t.add_row(f"PPO iteration ({p['num_envs']} envs x {p['steps_per_env']} steps)", f"{p['s_per_iteration']:.2f} s")
+    for key in sorted(k for k in res if k.startswith("ppo_iteration_")):
+        p = res[key]
+        share = ", ".join(f"{k} {100 * v:.0f} %" for k, v in p["share"].items())
+        t.add_row(f"PPO iteration {p['robot']} ({p['num_envs']} envs x {p['steps_per_env']} steps), hidden "
+                  f"{p['hidden_dtype']}, {p['threads']} thread(s): {share}",
+                  f"{p['s_per_iteration']:.2f} s, {p['samples_per_s']:,.0f} samples/s")
     for k in ("ball_task_analytic", "ball_task_pybullet"):
         b = res[k]
         t.add_row(f"ball task, {b['backend']}, {b['num_envs']} envs", f"{b['env_steps_per_s']:,.0f} steps/s")

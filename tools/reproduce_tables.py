@@ -141,18 +141,14 @@ def build_plan(args: argparse.Namespace, profile: Profile, lay: Layout) -> Plan:
     logs = lay.out / "logs"
     plan = Plan()
     if args.train:
-        needed = {(e.data_robot, e.dataset) for e in evals}
+        needed = {(e.data_robot, e.dataset, e.test_dir) for e in evals}
         if profile.name == "quick":
-            for robot, name in sorted(needed):
-                dest = lay.train_data / robot / name
-                plan.add("prepare", f"dataset {robot}/{name}", lambda robot=robot, name=name, dest=dest: None if (
-                    dest / "dataset.json").is_file() and args.reuse else sh(
-                    [str(BIN / "pathrl-dataset"), "generate", f"robot={robot}", f"dataset={name}",
-                     f"dataset.num_train={profile.num_train}", f"dataset.num_test={profile.num_test}",
-                     f"dataset.path={dest}", "overwrite=true"], logs / f"dataset_{robot}_{name}.log"))
+            for robot, name, test_dir in sorted(needed):
+                plan.add("prepare", f"dataset {robot}/{test_dir}", lambda robot=robot, name=name, test_dir=test_dir:
+                         tiny_dataset(robot, name, test_dir, profile, lay, args.reuse, logs))
         trained = {}
         for e in evals:
-            if e.generalization or e.model in CONTROLLER_MODELS:  # controllers are not trained
+            if e.generalization or e.second_test_set or e.model in CONTROLLER_MODELS:  # controllers: not trained
                 continue
             trained.setdefault(e.model, e)
         for model, e in trained.items():
@@ -170,6 +166,25 @@ def build_plan(args: argparse.Namespace, profile: Profile, lay: Layout) -> Plan:
             plan.add("timing", f"real time {key}", lambda key=key, robot=robot, split=split: realtime(
                 key, robot, split, profile, lay, args.reuse, logs))
     return plan
+
+
+def tiny_dataset(robot: str, name: str, test_dir: str, profile: Profile, lay: Layout, reuse: bool,
+                 logs: Path) -> None:
+    """A quick profile's generated dataset `<robot>/<test_dir>`; a second test split (`test_dir` is not the
+    dataset's name) holds only test paths, from the generator's next seed."""
+    dest = lay.train_data / robot / test_dir
+    if reuse and (dest / "dataset.json").is_file():
+        return
+    split = ([f"dataset.num_train={profile.num_train}"] if test_dir == name else
+             ["dataset.num_train=0", f"dataset.seed={dataset_seed(name) + 1}"])
+    sh([str(BIN / "pathrl-dataset"), "generate", f"robot={robot}", f"dataset={name}", *split,
+        f"dataset.num_test={profile.num_test}", f"dataset.path={dest}", "overwrite=true"],
+       logs / f"dataset_{robot}_{test_dir}.log")
+
+
+def dataset_seed(name: str) -> int:
+    """The generator seed of ``conf/dataset/<name>.yaml``."""
+    return int(yaml.safe_load((ROOT / "conf" / "dataset" / f"{name}.yaml").read_text()).get("seed", 0))
 
 
 def realtime(key: str, robot: str, split: str, profile: Profile, lay: Layout, reuse: bool, logs: Path) -> None:
@@ -220,7 +235,7 @@ def evaluate(e: Evaluation, profile: Profile, lay: Layout, reuse: bool, logs: Pa
         return
     if reuse and (raw / "metrics.json").is_file():
         return
-    data = rel(lay.test_data / e.data_robot / e.dataset)
+    data = rel(lay.test_data / e.data_robot / e.test_dir)
     cmd = [str(BIN / "pathrl-eval"), f"run_dir={rel(model)}", f"dataset.path={data}",
            f"segments={e.segments}", "seed=0", f"out={raw}"]  # eager limits (pathrl-eval's default: faster here)
     if profile.episodes is not None:

@@ -88,6 +88,7 @@ def evaluate(
     backend: str = "pybullet",
     compile_limits: bool = False,
     open_loop: bool = False,
+    checkpoint: str | None = None,
 ) -> dict[str, Any]:
     """Evaluate the policy of `run_dir` deterministically; write metrics.json (+ episodes.mcap).
 
@@ -99,11 +100,16 @@ def evaluate(
     :mod:`pathrl.limits.kernels` (same results to rounding); off by default: an evaluation is a few hundred
     steps, too short to earn back the per-process tracing (iiwa7, 1200 episodes: 17 s eager, 35 s compiled).
     ``open_loop``: the task's sensor stays at its first value of each episode (:class:`FrozenSensor`).
+    ``checkpoint``: a checkpoint file name in `run_dir` (e.g. ``model_99.pt``) instead of the latest one.
     A model-based controller's directory (``controller:`` in its config,
     :func:`pathrl.baselines.ball_feedback.make_controller`) evaluates like a policy.
     """
     torch.set_num_threads(int(os.environ.get("PATHRL_THREADS", "1")))
     cfg, ckpt, summary = load_run(run_dir)
+    if checkpoint is not None:
+        ckpt = Path(run_dir) / checkpoint
+        if not ckpt.is_file():
+            raise RunError(f"checkpoint not found: {ckpt}")
     trained_task = task_cfg(cfg)
     if task is not None and task != "tracking":
         if trained_task["feedback"] not in (None, task):

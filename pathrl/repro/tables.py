@@ -26,12 +26,19 @@ class Evaluation:
     task: str | None = None  # evaluated with this feedback task in PyBullet (e.g. ball_on_plate)
     episodes: int | None = None  # default: 1200 paper segments, or every path once for segments=full
     open_loop: bool = False  # the task's sensor frozen at its first value (does the policy use the feedback?)
+    second_test_set: bool = False  # on `<dataset>_test2`: the same generator's next seed, never trained on
 
     @property
     def id(self) -> str:
         base = f"{self.model}_on_{self.dataset}" if self.generalization else self.model
         base = f"{base}_in_pybullet" if self.task else base
+        base = f"{base}{TEST2_SUFFIX}" if self.second_test_set else base
         return f"{base}_open_loop" if self.open_loop else base
+
+    @property
+    def test_dir(self) -> str:
+        """Directory name of the test split under ``datasets/<data_robot>/``."""
+        return f"{self.dataset}{TEST2_SUFFIX}" if self.second_test_set else self.dataset
 
     @property
     def data_robot(self) -> str:
@@ -40,7 +47,7 @@ class Evaluation:
 
     @property
     def baseline(self) -> Baseline:
-        return Baseline(self.data_robot, self.dataset, _knot_positions(self.knots), self.segments)
+        return Baseline(self.data_robot, self.test_dir, _knot_positions(self.knots), self.segments)
 
 
 @dataclass(frozen=True)
@@ -56,6 +63,11 @@ class Baseline:
     def id(self) -> str:
         return f"toppra_{self.robot}_{self.dataset}_{self.segments}"
 
+
+#: Suffix of a second test split: ``datasets/<robot>/<dataset>_test2`` holds 200 test paths of the same
+#: generator and settings with the next seed (``pathrl-dataset generate ... dataset.seed=<seed + 1>
+#: dataset.num_train=0``), never trained on or tuned for; over-fitting to the first split shows there.
+TEST2_SUFFIX = "_test2"
 
 #: Robots whose paths (path joints and their limits) are another robot's: TOPP-RA runs once for both.
 PATH_ROBOT = {"armar4_legs": "armar4"}
@@ -76,8 +88,9 @@ class Row:
 
 def _e(model: str, robot: str, dataset: str, knots: str = "curvature_9", segments: str = "paper",
        generalization: bool = False, task: str | None = None, episodes: int | None = None,
-       open_loop: bool = False) -> Evaluation:
-    return Evaluation(model, robot, dataset, knots, segments, generalization, task, episodes, open_loop)
+       open_loop: bool = False, second_test_set: bool = False) -> Evaluation:
+    return Evaluation(model, robot, dataset, knots, segments, generalization, task, episodes, open_loop,
+                      second_test_set)
 
 
 def _ball(model: str, open_loop: bool = False) -> Evaluation:
@@ -89,6 +102,7 @@ IIWA_RANDOM = _e("iiwa7_random", "iiwa7", "random")
 ARMAR4_RANDOM = _e("armar4_random", "armar4", "random")
 
 TABLE_I = "table_I_tracking_no_feedback"
+TABLE_I_TEST2 = "table_I_second_test_set"  # ours: Table I's policies on the second test splits
 TABLE_II = "table_II_tradeoff_length_vs_deviation"
 TABLE_III = "table_III_knots_in_state"
 TABLE_IV = "table_IV_generalization_random_to_target_point"
@@ -109,6 +123,12 @@ ROWS: tuple[Row, ...] = (
     Row(TABLE_I, "armar6/random", _e("armar6_random", "armar6", "random")),
     Row(TABLE_I, "armar4_fixed/random", ARMAR4_RANDOM),
     Row(TABLE_I, "armar4_fixed/target_point", _e("armar4_target_point", "armar4", "target_point")),
+    *(Row(TABLE_I_TEST2, key, _e(model, robot, dataset, second_test_set=True)) for key, model, robot, dataset in (
+        ("iiwa7/random", "iiwa7_random", "iiwa7", "random"),
+        ("iiwa7/target_point", "iiwa7_target_point", "iiwa7", "target_point"),
+        ("armar6/random", "armar6_random", "armar6", "random"),
+        ("armar4_fixed/random", "armar4_random", "armar4", "random"),
+        ("armar4_fixed/target_point", "armar4_target_point", "armar4", "target_point"))),
     Row(TABLE_II, "length_lt_deviation", _e("iiwa7_random_length_lt_deviation", "iiwa7", "random")),
     Row(TABLE_II, "length_eq_deviation", _e("iiwa7_random_length_eq_deviation", "iiwa7", "random")),
     Row(TABLE_II, "length_gt_deviation", IIWA_RANDOM),
@@ -134,6 +154,9 @@ ROWS: tuple[Row, ...] = (
                                                            "target_point", task="standing", episodes=200)),
 )
 
+
+#: Tables of ours whose rows compare with a table of the paper (same row keys).
+PAPER_TABLE = {TABLE_I_TEST2: TABLE_I}
 
 #: Rows of ours that the paper does not have (shown with a dash for the paper's value).
 NOT_IN_PAPER = frozenset({(TABLE_VII, "balancing_reward/open_loop"), (TABLE_VII, "model_based_feedback"),

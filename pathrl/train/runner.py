@@ -184,7 +184,8 @@ class PathRLRunner(OnPolicyRunner):
             write_json_atomic(self._summary, {**prev, "wall_time_s": self.wall_time_s()})
         saved = self.alg.save()
         saved["iter"] = self.current_learning_iteration
-        saved["infos"] = infos
+        # The wall time in the checkpoint itself: time-to-quality curves read it (pathrl.eval.curve).
+        saved["infos"] = {**(infos or {}), **({"wall_time_s": self.wall_time_s()} if self._summary else {})}
         tmp = f"{path}.tmp"
         torch.save(saved, tmp)
         os.replace(tmp, path)
