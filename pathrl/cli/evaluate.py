@@ -3,11 +3,12 @@
     pathrl-eval run_dir=models/iiwa7_random [dataset=NAME | dataset.path=DIR] [split=test]
                 [episodes=N] [segments=paper|full] [seed=0] [out=DIR]
                 [task=ball_on_plate|standing] [backend=pybullet|analytic] [compile_limits=true|false]
-                [open_loop=true|false]
+                [open_loop=true|false] [checkpoint=model_K.pt]
 
 ``task`` adds a feedback task to a run trained without one (its sensor values stay unobserved); runs with
 a task are simulated with ``backend`` (default PyBullet). ``open_loop=true`` freezes the task's sensor at
-its first value of each episode. ``run_dir`` may also be a model-based controller's directory
+its first value of each episode. ``checkpoint`` evaluates that checkpoint of a training run instead of
+its latest. ``run_dir`` may also be a model-based controller's directory
 (``models/iiwa7_ball_tray_controller``).
 """
 
@@ -19,9 +20,9 @@ from pathrl.cli.common import UserError, run_cli
 
 USAGE = ("usage: pathrl-eval run_dir=RUN [dataset=NAME | dataset.path=DIR] [split=test] [episodes=N] "
          "[segments=paper|full] [seed=S] [out=DIR] [record=true|false] [task=ball_on_plate|standing] "
-         "[backend=pybullet|analytic] [compile_limits=true|false] [open_loop=true|false]")
+         "[backend=pybullet|analytic] [compile_limits=true|false] [open_loop=true|false] [checkpoint=model_K.pt]")
 KEYS = {"run_dir", "dataset", "dataset.path", "split", "episodes", "segments", "seed", "out", "record", "num_envs",
-        "task", "backend", "compile_limits", "open_loop"}
+        "task", "backend", "compile_limits", "open_loop", "checkpoint"}
 
 
 def parse_args(argv: list[str]) -> dict[str, str]:
@@ -87,7 +88,8 @@ def _main(argv: list[str]) -> None:
                      _int(args, "seed", 0) or 0, Path(args["out"]) if "out" in args else None,
                      num_envs=_int(args, "num_envs", 1200) or 1200,
                      record=flags["record"], task=args.get("task"), backend=args.get("backend", "pybullet"),
-                     compile_limits=flags["compile_limits"], open_loop=flags["open_loop"])
+                     compile_limits=flags["compile_limits"], open_loop=flags["open_loop"],
+                     checkpoint=args.get("checkpoint"))
     except (RunError, DatasetError) as exc:
         raise UserError(str(exc)) from None
     _print_table(m)

@@ -141,6 +141,15 @@ class StdAnnealCfg:
 
 
 @dataclass
+class CriticWarmupCfg:
+    """The first ``iterations`` iterations of a warm-started run train only the critic; the actor then starts at
+    ``learning_rate`` (null: ``agent.algorithm.learning_rate``)."""
+
+    iterations: int = 0
+    learning_rate: float | None = None
+
+
+@dataclass
 class TrainAppCfg:
     """``pathrl-train``."""
 
@@ -161,3 +170,5 @@ class TrainAppCfg:
     run_dir: str = MISSING
     std_anneal: StdAnnealCfg | None = field(default_factory=lambda: StdAnnealCfg())
     init_from: str | None = None  # warm start: actor/critic weights of this run or model dir (new inputs start at 0)
+    critic_warmup: CriticWarmupCfg = field(default_factory=CriticWarmupCfg)  # a new critic learns alone first
+    teacher: dict[str, Any] = field(default_factory=dict)  # agent=distillation: the labelling controller (name: tray)

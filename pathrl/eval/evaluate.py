@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 import torch
 import yaml
+from rsl_rl.models import MLPModel
 
 from pathrl.baselines.ball_feedback import make_controller
 from pathrl.dataset.io import load_pathset
@@ -28,7 +29,8 @@ from pathrl.paths.knots import KnotStrategy
 from pathrl.paths.segments import evaluation_plan
 from pathrl.robot.kinematics import ForwardKinematics
 from pathrl.robot.model import RobotSpec, load_robot
-from pathrl.train.runner import PathRLRunner, env_cfg_from, latest_checkpoint, make_feedback, rsl_train_cfg, task_cfg
+from pathrl.train.models import MixedPrecisionMLPModel
+from pathrl.train.runner import env_cfg_from, latest_checkpoint, make_feedback, task_cfg
 
 
 class RunError(ValueError):
@@ -62,15 +64,28 @@ def load_run(run_dir: Path) -> tuple[dict[str, Any], Path | None, dict[str, Any]
     return cfg, ckpt, summary
 
 
-def load_policy(cfg: dict[str, Any], env: PathTrackingEnv, ckpt: Path):
-    """The deterministic actor of checkpoint `ckpt` (weights only)."""
-    train_cfg = rsl_train_cfg(cfg, Path("."))
-    runner = PathRLRunner(env, train_cfg, log_dir=None, device=str(env.device))
+#: Policy network classes a run's config may name (``agent.actor`` or ``agent.student``): evaluation builds
+#: nothing else from a config it is handed.
+POLICY_MODELS = {"MLPModel": MLPModel, "rsl_rl.models:MLPModel": MLPModel,
+                 "pathrl.train.models:MixedPrecisionMLPModel": MixedPrecisionMLPModel}
+
+
+def load_policy(cfg: dict[str, Any], env: PathTrackingEnv, ckpt: Path) -> torch.nn.Module:
+    """The deterministic policy of checkpoint `ckpt` (weights only): the PPO actor, or a distillation run's
+    student."""
+    agent = cfg.get("agent") or {}
+    role = "student" if "student" in agent else "actor"
+    spec = dict(agent.get(role) or {})
+    cls = POLICY_MODELS.get(str(spec.pop("class_name", "")))
+    if cls is None:
+        raise RunError(f"agent.{role}.class_name: expected one of {sorted(POLICY_MODELS)}")
+    groups = {role: list((agent.get("obs_groups") or {}).get(role) or ["policy"])}
     try:
-        runner.load(str(ckpt), load_cfg={"actor": True}, map_location=str(env.device))
-    except (RuntimeError, KeyError, EOFError, OSError) as exc:
+        model = cls(env.get_observations(), groups, role, env.num_actions, **spec)
+        model.load_state_dict(torch.load(ckpt, weights_only=True, map_location="cpu")[f"{role}_state_dict"])
+    except (RuntimeError, KeyError, TypeError, EOFError, OSError) as exc:
         raise RunError(f"{ckpt}: unreadable checkpoint ({str(exc).splitlines()[0]})") from None
-    return runner.get_inference_policy(device=str(env.device))
+    return model.to(env.device).eval()
 
 
 def evaluate(
@@ -107,6 +122,8 @@ def evaluate(
     torch.set_num_threads(int(os.environ.get("PATHRL_THREADS", "1")))
     cfg, ckpt, summary = load_run(run_dir)
     if checkpoint is not None:
+        if Path(checkpoint).name != checkpoint:
+            raise RunError(f"checkpoint={checkpoint}: give a file name in run_dir (e.g. model_99.pt)")
         ckpt = Path(run_dir) / checkpoint
         if not ckpt.is_file():
             raise RunError(f"checkpoint not found: {ckpt}")

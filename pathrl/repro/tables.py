@@ -148,6 +148,11 @@ ROWS: tuple[Row, ...] = (
     Row(TABLE_VII, "balancing_reward/open_loop", _ball("iiwa7_ball_balancing_reward", open_loop=True)),
     Row(TABLE_VII, "model_based_feedback", _ball("iiwa7_ball_tray_controller")),
     Row(TABLE_VII, "model_based_feedback/open_loop", _ball("iiwa7_ball_tray_controller", open_loop=True)),
+    # the controller taught to the policy network (DAgger, pathrl.train.distill), then fine-tuned with PPO
+    Row(TABLE_VII, "distilled", _ball("iiwa7_ball_balancing_distill")),
+    Row(TABLE_VII, "distilled/open_loop", _ball("iiwa7_ball_balancing_distill", open_loop=True)),
+    Row(TABLE_VII, "distilled_ppo", _ball("iiwa7_ball_balancing_finetune")),
+    Row(TABLE_VII, "distilled_ppo/open_loop", _ball("iiwa7_ball_balancing_finetune", open_loop=True)),
     # free-standing ARMAR-4 in PyBullet, 200 paper segments each (a PyBullet episode costs ~1 s of CPU)
     Row(TABLE_VIII, "fixed_legs/no_balancing_reward", _e("armar4_target_point", "armar4", "target_point",
                                                          task="standing", episodes=200)),
@@ -163,7 +168,9 @@ PAPER_TABLE = {TABLE_I_TEST2: TABLE_I}
 
 #: Rows of ours that the paper does not have (shown with a dash for the paper's value).
 NOT_IN_PAPER = frozenset({(TABLE_VII, "balancing_reward/open_loop"), (TABLE_VII, "model_based_feedback"),
-                          (TABLE_VII, "model_based_feedback/open_loop")})
+                          (TABLE_VII, "model_based_feedback/open_loop"), (TABLE_VII, "distilled"),
+                          (TABLE_VII, "distilled/open_loop"), (TABLE_VII, "distilled_ppo"),
+                          (TABLE_VII, "distilled_ppo/open_loop")})
 
 #: Model directories that hold a model-based controller (``controller:`` in config.yaml): evaluated, not trained.
 CONTROLLER_MODELS = frozenset({"iiwa7_ball_tray_controller"})
@@ -174,6 +181,7 @@ WARM_STARTS = {"iiwa7_ball_balancing_reward": "iiwa7_ball_balancing",
                "iiwa7_ball_balancing_imu": "iiwa7_ball_balancing_reward",
                "iiwa7_ball_balancing_drive": "iiwa7_ball_balancing_reward",
                "iiwa7_ball_balancing_tcp": "iiwa7_ball_balancing_reward",
+               "iiwa7_ball_balancing_finetune": "iiwa7_ball_balancing_distill",
                "armar4_target_point_balancing": "armar4_target_point",
                "armar4_legs_target_point_balancing": "armar4_target_point"}
 

@@ -13,7 +13,7 @@ from typing import Any
 
 import torch
 import yaml
-from rsl_rl.runners import OnPolicyRunner
+from rsl_rl.runners import DistillationRunner, OnPolicyRunner
 
 from pathrl.dataset.io import load_pathset
 from pathrl.envs.rewards import build_reward_terms
@@ -29,7 +29,8 @@ CHECKPOINT_RE = re.compile(r"^model_(\d+)\.pt$")
 #: without the key resumes under a config holding this value (and is evaluated with it, `env_cfg_from`).
 ADDED_KEYS: dict[str, Any] = {"env.free_joint_actions": "linear", "env.posture_omega": 3.0, "task.imu": False,
                               "env.tcp_obs": False, "env.tcp_obs_box": [-1.0, 1.0, -1.0, 1.0, -0.7, 1.3],
-                              "env.tcp_obs_error": 0.1}
+                              "env.tcp_obs_error": 0.1, "teacher": {},
+                              "critic_warmup": {"iterations": 0, "learning_rate": None}}
 
 
 def env_cfg_from(cfg: dict[str, Any], num_envs: int | None = None, seed: int | None = None,
@@ -166,6 +167,40 @@ class PathRLRunner(OnPolicyRunner):
         apply(next_it[0])
         self.alg.update = update_then_cap
 
+    def set_critic_warmup(self, iterations: int, learning_rate: float | None = None) -> None:
+        """For the first `iterations` iterations of the run (counted from 0, so a resume continues the count)
+        only the critic learns: the actor's weights, action std and observation normalizer stay as loaded.
+        A warm start with a new critic (e.g. from a distilled student) would otherwise follow the advantages
+        of an untrained value function. The actor then starts at `learning_rate` (default: the configured one;
+        the adaptive schedule sees no KL while the actor is frozen, and reacts only after a first update at
+        this rate)."""
+        actor = self.alg.get_policy()
+        update = self.alg.update
+        lr0 = float(self.alg.learning_rate if learning_rate is None else learning_rate)
+        next_it = [self.current_learning_iteration]
+
+        def freeze(frozen: bool) -> None:
+            for p in actor.parameters():
+                p.requires_grad_(not frozen)
+            if frozen:
+                actor.update_normalization = lambda obs: None  # instance attribute shadows the method
+            elif "update_normalization" in vars(actor):
+                del actor.update_normalization
+
+        def update_warm() -> dict[str, float]:
+            out = update()
+            next_it[0] += 1
+            if next_it[0] == iterations:
+                freeze(False)
+                self.alg.learning_rate = lr0
+                for group in self.alg.optimizer.param_groups:
+                    group["lr"] = lr0
+            return out
+
+        if next_it[0] < iterations:
+            freeze(True)
+            self.alg.update = update_warm
+
     _summary: Path | None = None
     _wall: tuple[float, float] = (0.0, 0.0)
 
@@ -197,6 +232,17 @@ class PathRLRunner(OnPolicyRunner):
         if self.alg.load(loaded, load_cfg, strict):
             self.current_learning_iteration = int(loaded["iter"])
         return loaded.get("infos") or {}
+
+
+class PathRLDistillationRunner(PathRLRunner, DistillationRunner):
+    """rsl-rl's DistillationRunner (student-teacher behaviour cloning) with PathRLRunner's checkpoints."""
+
+    def load(self, path: str, load_cfg: dict | None = None, strict: bool = True,
+             map_location: str | None = None) -> dict:
+        # A controller teacher has an empty state dict, which rsl-rl's default (teacher included) takes for a
+        # missing one; resume loads the student, its optimizer and the iteration.
+        return super().load(path, load_cfg or {"student": True, "optimizer": True, "iteration": True}, strict,
+                            map_location)
 
 
 def latest_checkpoint(run_dir: Path) -> Path | None:
@@ -235,12 +281,18 @@ def train(cfg: dict[str, Any], run_dir: Path, resume: bool = False) -> dict[str,
     os.replace(tmp, run_dir / "config.yaml")
 
     env = build_env(cfg, "train")
+    distill = cfg["agent"]["algorithm"]["class_name"] == "Distillation"
+    if distill:
+        env = _with_teacher(cfg, env)
     prev = json.loads((run_dir / "summary.json").read_text()) if (run_dir / "summary.json").exists() else {}
     # The observation normalizer D must be known to evaluate the policy on any other path set.
     write_json_atomic(run_dir / "summary.json",
                       {**prev, "experiment": cfg["experiment"], "knot_gap_norm": env.knot_gap})
     train_cfg = rsl_train_cfg(cfg, run_dir)
-    runner = PathRLRunner(env, train_cfg, log_dir=str(run_dir), device=cfg.get("device", "cpu"))
+    runner_cls = PathRLDistillationRunner if distill else PathRLRunner
+    runner = runner_cls(env, train_cfg, log_dir=str(run_dir), device=cfg.get("device", "cpu"))
+    if distill:
+        runner.alg.teacher_loaded = True  # a controller: nothing to load (pathrl.train.distill)
     done_before = 0
     if resume and ckpt is not None:
         runner.load(str(ckpt))
@@ -249,13 +301,15 @@ def train(cfg: dict[str, Any], run_dir: Path, resume: bool = False) -> dict[str,
     elif cfg.get("init_from"):
         from pathrl.train.warm_start import warm_start
 
-        init_std = float(cfg["agent"]["actor"]["distribution_cfg"].get("init_std", 1.0))
-        warm_start(runner.alg, cfg["init_from"], env.num_obs, init_std, env.robot.joints, env.robot.path_joints)
+        warm_start(runner.alg, cfg["init_from"], env.num_obs, _init_std(cfg), env.robot.joints, env.robot.path_joints)
+    warmup = cfg.get("critic_warmup") or {}
+    if int(warmup.get("iterations") or 0) > 0:
+        lr = warmup.get("learning_rate")
+        runner.set_critic_warmup(int(warmup["iterations"]), None if lr is None else float(lr))
     total = int(cfg["iterations"])
     anneal = cfg.get("std_anneal")
     if anneal:
-        init_std = float(cfg["agent"]["actor"]["distribution_cfg"].get("init_std", 1.0))
-        runner.set_std_schedule(total, init_std, float(anneal["final"]), float(anneal["start"]))
+        runner.set_std_schedule(total, _init_std(cfg), float(anneal["final"]), float(anneal["start"]))
     remaining = max(total - done_before, 0)
     runner.track_wall_time(run_dir / "summary.json", float(prev.get("wall_time_s", 0.0)))
     if remaining:
@@ -276,6 +330,26 @@ def train(cfg: dict[str, Any], run_dir: Path, resume: bool = False) -> dict[str,
     }
     write_json_atomic(run_dir / "summary.json", summary)
     return summary
+
+
+def _init_std(cfg: dict[str, Any]) -> float:
+    """The initial action std of the policy (the PPO actor or the distillation student)."""
+    policy = cfg["agent"].get("actor") or cfg["agent"]["student"]
+    return float(policy["distribution_cfg"].get("init_std", 1.0))
+
+
+def _with_teacher(cfg: dict[str, Any], env: PathTrackingEnv):
+    """The env of a distillation run: its observations carry the teacher controller's actions."""
+    from pathrl.baselines.ball_feedback import make_controller
+    from pathrl.train.distill import TeacherLabels
+
+    if not cfg.get("teacher"):
+        raise ValueError("agent=distillation needs a teacher controller (teacher: {name: tray, ...})")
+    if cfg.get("init_from"):
+        raise ValueError("init_from: a distillation run starts its student from scratch; remove init_from")
+    if int((cfg.get("critic_warmup") or {}).get("iterations") or 0):
+        raise ValueError("critic_warmup: a distillation run has no critic")
+    return TeacherLabels(env, make_controller(cfg["teacher"], env))
 
 
 def _config_diff(a: Any, b: Any, ignore: set[str], prefix: str = "") -> str:

@@ -31,13 +31,15 @@ def training_stats(run_dir: Path, last_iter: int) -> dict[str, Any]:
 
 
 def ship(run_dir: Path, dest: Path) -> Path:
-    """Copy the run's config and last checkpoint (actor + critic weights, no optimizer) to `dest`."""
+    """Copy the run's config and last checkpoint (actor + critic weights, or a distilled student; no optimizer)
+    to `dest`."""
     run_dir, dest = Path(run_dir), Path(dest)
     ckpt = latest_checkpoint(run_dir)
     if ckpt is None or not (run_dir / "config.yaml").is_file():
         raise FileNotFoundError(f"{run_dir} has no config.yaml or checkpoint")
     state = torch.load(ckpt, weights_only=True, map_location="cpu")
-    slim = {k: state[k] for k in ("actor_state_dict", "critic_state_dict", "iter")}
+    keys = ("student_state_dict",) if "student_state_dict" in state else ("actor_state_dict", "critic_state_dict")
+    slim = {k: state[k] for k in (*keys, "iter")}  # a distillation run ships its student (no teacher: a controller)
     slim["infos"] = {"source_checkpoint": ckpt.name}
     dest.mkdir(parents=True, exist_ok=True)
     tmp = dest / "model.pt.tmp"

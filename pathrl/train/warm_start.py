@@ -112,16 +112,27 @@ def source_joints(ckpt: Path) -> tuple[list[str], list[str]] | None:
 
 def warm_start(alg, source: str | Path, num_obs: int, init_std: float | None = None,
                joints: Sequence[str] | None = None, path_joints: Sequence[str] | None = None) -> Path:
-    """Load actor and critic of `source` into the PPO `alg`. With the new robot's `joints` and `path_joints`
+    """Load actor and critic of `source` into the PPO `alg` (a distillation run's student: the actor only). With the new robot's `joints` and `path_joints`
     given, a source trained on fewer joints (same path joints) is mapped joint by joint; otherwise the inputs
     are only widened at the end. The action std is reset to `init_std` (a converged source has almost no
     exploration left). Returns the checkpoint used."""
     ckpt = source_checkpoint(source)
     try:
         loaded = torch.load(ckpt, weights_only=True, map_location="cpu")
-        actor, critic = dict(loaded["actor_state_dict"]), dict(loaded["critic_state_dict"])
+        actor = dict(loaded["actor_state_dict" if "actor_state_dict" in loaded else "student_state_dict"])
+        critic = dict(loaded["critic_state_dict"]) if "critic_state_dict" in loaded else None
     except (RuntimeError, KeyError, EOFError, OSError) as exc:
         raise WarmStartError(f"{ckpt}: unreadable checkpoint ({str(exc).splitlines()[0]})") from None
+    if critic is None:  # a distilled student (pathrl.train.distill): the critic starts new
+        if joints is not None and (src := source_joints(ckpt)) is not None and list(src[0]) != list(joints):
+            raise WarmStartError(f"init_from={source}: a distilled student must have the new robot's joints")
+        if init_std is not None and "distribution.std_param" in actor:
+            actor["distribution.std_param"] = torch.full_like(actor["distribution.std_param"], init_std)
+        try:
+            alg.load({"actor_state_dict": widen_inputs(actor, num_obs)}, {"actor": True}, True)
+        except RuntimeError as exc:
+            raise WarmStartError(f"init_from={source}: network does not fit ({str(exc).splitlines()[0]})") from None
+        return ckpt
     if init_std is not None and "distribution.std_param" in actor:
         actor["distribution.std_param"] = torch.full_like(actor["distribution.std_param"], init_std)
     src = source_joints(ckpt) if joints is not None else None
