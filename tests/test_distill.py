@@ -7,10 +7,10 @@ from pathlib import Path
 
 import torch
 from tensordict import TensorDict
+from test_train import run, train_cmd
 
 from pathrl.logging.mcap_io import read_messages
 from pathrl.train.distill import TEACHER_GROUP, ControllerTeacher, TeacherLabels
-from test_train import run, train_cmd
 
 BALL = ("task=ball_on_plate", "reward=ball_balancing", "knots=distance_5", "env.segments=full",
         "env.episode_budget_s=6.0", "env.scale_budget=false")

@@ -112,10 +112,10 @@ def source_joints(ckpt: Path) -> tuple[list[str], list[str]] | None:
 
 def warm_start(alg, source: str | Path, num_obs: int, init_std: float | None = None,
                joints: Sequence[str] | None = None, path_joints: Sequence[str] | None = None) -> Path:
-    """Load actor and critic of `source` into the PPO `alg` (a distillation run's student: the actor only). With the new robot's `joints` and `path_joints`
-    given, a source trained on fewer joints (same path joints) is mapped joint by joint; otherwise the inputs
-    are only widened at the end. The action std is reset to `init_std` (a converged source has almost no
-    exploration left). Returns the checkpoint used."""
+    """Load actor and critic of `source` into the PPO `alg` (a distillation run's student: the actor only).
+    With the new robot's `joints` and `path_joints` given, a source trained on fewer joints (same path joints)
+    is mapped joint by joint; otherwise the inputs are only widened at the end. The action std is reset to
+    `init_std` (a converged source has almost no exploration left). Returns the checkpoint used."""
     ckpt = source_checkpoint(source)
     try:
         loaded = torch.load(ckpt, weights_only=True, map_location="cpu")
