@@ -164,7 +164,7 @@ def _training(results: dict[str, Any]) -> list[str]:
              "From `models/<policy>/summary.json`; wall time on the 2-core reference machine, not always idle (a "
              "warm-started policy's budget excludes its source's). The authors' budget from their checkpoints' "
              "metadata.", "",
-             "| policy | PPO iterations | env steps (M) | envs | wall time (min) | warm start from | "
+             "| policy | iterations (PPO or DAgger) | env steps (M) | envs | wall time (min) | warm start from | "
              "authors: env steps (M) / wall time (h) |",
              "|---|---|---|---|---|---|---|"]
     for model, sm in budgets.items():
