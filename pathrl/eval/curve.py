@@ -8,8 +8,6 @@ off the first checkpoint that meets a target (duration and mean Cartesian deviat
 
 from __future__ import annotations
 
-import contextlib
-import io
 import json
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -78,9 +76,8 @@ def evaluate_curve(run_dir: Path, dataset: str, out_dir: Path, every: int = 50, 
         if m is None:
             if progress:
                 print(f"evaluate {ckpt}")
-            with contextlib.redirect_stdout(io.StringIO()):  # rsl-rl prints both models per load
-                m = evaluate(run_dir, dataset_path=dataset, episodes=episodes, out_dir=out, record=False,
-                             progress=False, checkpoint=ckpt.name)
+            m = evaluate(run_dir, dataset_path=dataset, episodes=episodes, out_dir=out, record=False,
+                         progress=False, checkpoint=ckpt.name)
         points.append(CurvePoint(k + 1, (k + 1) * steps_per_it, checkpoint_wall_time(ckpt), float(m["duration_s"]),
                                  float(m["cart_pos_dev_mean_cm"]), int(m["limit_violations"])))
     return points

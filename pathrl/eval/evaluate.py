@@ -30,7 +30,7 @@ from pathrl.paths.segments import evaluation_plan
 from pathrl.robot.kinematics import ForwardKinematics
 from pathrl.robot.model import RobotSpec, load_robot
 from pathrl.train.models import MixedPrecisionMLPModel
-from pathrl.train.runner import env_cfg_from, latest_checkpoint, make_feedback, task_cfg
+from pathrl.train.runner import env_cfg_from, latest_checkpoint, make_feedback, policy_role, task_cfg
 
 
 class RunError(ValueError):
@@ -74,7 +74,7 @@ def load_policy(cfg: dict[str, Any], env: PathTrackingEnv, ckpt: Path) -> torch.
     """The deterministic policy of checkpoint `ckpt` (weights only): the PPO actor, or a distillation run's
     student."""
     agent = cfg.get("agent") or {}
-    role = "student" if "student" in agent else "actor"
+    role = policy_role(agent)
     spec = dict(agent.get(role) or {})
     cls = POLICY_MODELS.get(str(spec.pop("class_name", "")))
     if cls is None:

@@ -33,7 +33,7 @@ class TeacherLabels:
     def __init__(self, env: PathTrackingEnv, controller: Callable[[TensorDict], Tensor]):
         self.env, self.controller = env, controller
         self._steps, self._labelled_at = 0, -1
-        self._label = torch.zeros(env.num_envs, env.num_actions)
+        self._label: Tensor | None = None
 
     def __getattr__(self, name: str):
         return getattr(self.env, name)

@@ -8,6 +8,7 @@ import math
 import os
 import re
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -147,25 +148,29 @@ class PathRLRunner(OnPolicyRunner):
     the mean action itself finish the path.
     """
 
+    def after_each_update(self, fn: Callable[[int], None]) -> None:
+        """Call ``fn(it)`` after every update, `it` being the iteration that starts next (counted from the
+        run's current iteration, so a resumed run continues the count)."""
+        update, next_it = self.alg.update, [self.current_learning_iteration]
+
+        def update_then_call() -> dict[str, float]:
+            out = update()
+            next_it[0] += 1
+            fn(next_it[0])
+            return out
+
+        self.alg.update = update_then_call
+
     def set_std_schedule(self, total: int, init_std: float, final: float, start: float) -> None:
         """Cap the std before every rollout (the cap depends only on the iteration, so resume reproduces it)."""
         dist = self.alg.get_policy().distribution
-        update = self.alg.update
 
         def apply(it: int) -> None:
             dist.std_range[1] = max(std_cap(it, total, init_std, final, start), dist.std_range[0])
             dist.log_std_range[1] = math.log(dist.std_range[1])
 
-        next_it = [self.current_learning_iteration]
-
-        def update_then_cap() -> dict[str, float]:
-            out = update()
-            next_it[0] += 1
-            apply(next_it[0])
-            return out
-
-        apply(next_it[0])
-        self.alg.update = update_then_cap
+        apply(self.current_learning_iteration)
+        self.after_each_update(apply)
 
     def set_critic_warmup(self, iterations: int, learning_rate: float | None = None) -> None:
         """For the first `iterations` iterations of the run (counted from 0, so a resume continues the count)
@@ -174,32 +179,25 @@ class PathRLRunner(OnPolicyRunner):
         of an untrained value function. The actor then starts at `learning_rate` (default: the configured one;
         the adaptive schedule sees no KL while the actor is frozen, and reacts only after a first update at
         this rate)."""
+        if self.current_learning_iteration >= iterations:
+            return
         actor = self.alg.get_policy()
-        update = self.alg.update
         lr0 = float(self.alg.learning_rate if learning_rate is None else learning_rate)
-        next_it = [self.current_learning_iteration]
+        for p in actor.parameters():
+            p.requires_grad_(False)
+        actor.update_normalization = lambda obs: None  # instance attribute shadows the method
 
-        def freeze(frozen: bool) -> None:
+        def release(it: int) -> None:
+            if it != iterations:
+                return
             for p in actor.parameters():
-                p.requires_grad_(not frozen)
-            if frozen:
-                actor.update_normalization = lambda obs: None  # instance attribute shadows the method
-            elif "update_normalization" in vars(actor):
-                del actor.update_normalization
+                p.requires_grad_(True)
+            del actor.update_normalization
+            self.alg.learning_rate = lr0
+            for group in self.alg.optimizer.param_groups:
+                group["lr"] = lr0
 
-        def update_warm() -> dict[str, float]:
-            out = update()
-            next_it[0] += 1
-            if next_it[0] == iterations:
-                freeze(False)
-                self.alg.learning_rate = lr0
-                for group in self.alg.optimizer.param_groups:
-                    group["lr"] = lr0
-            return out
-
-        if next_it[0] < iterations:
-            freeze(True)
-            self.alg.update = update_warm
+        self.after_each_update(release)
 
     _summary: Path | None = None
     _wall: tuple[float, float] = (0.0, 0.0)
@@ -332,10 +330,14 @@ def train(cfg: dict[str, Any], run_dir: Path, resume: bool = False) -> dict[str,
     return summary
 
 
+def policy_role(agent: dict[str, Any]) -> str:
+    """The key of the policy network in an RSL-RL train cfg: ``student`` (distillation) or ``actor`` (PPO)."""
+    return "student" if "student" in agent else "actor"
+
+
 def _init_std(cfg: dict[str, Any]) -> float:
     """The initial action std of the policy (the PPO actor or the distillation student)."""
-    policy = cfg["agent"].get("actor") or cfg["agent"]["student"]
-    return float(policy["distribution_cfg"].get("init_std", 1.0))
+    return float(cfg["agent"][policy_role(cfg["agent"])]["distribution_cfg"].get("init_std", 1.0))
 
 
 def _with_teacher(cfg: dict[str, Any], env: PathTrackingEnv):

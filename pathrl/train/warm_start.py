@@ -123,20 +123,12 @@ def warm_start(alg, source: str | Path, num_obs: int, init_std: float | None = N
         critic = dict(loaded["critic_state_dict"]) if "critic_state_dict" in loaded else None
     except (RuntimeError, KeyError, EOFError, OSError) as exc:
         raise WarmStartError(f"{ckpt}: unreadable checkpoint ({str(exc).splitlines()[0]})") from None
-    if critic is None:  # a distilled student (pathrl.train.distill): the critic starts new
-        if joints is not None and (src := source_joints(ckpt)) is not None and list(src[0]) != list(joints):
-            raise WarmStartError(f"init_from={source}: a distilled student must have the new robot's joints")
-        if init_std is not None and "distribution.std_param" in actor:
-            actor["distribution.std_param"] = torch.full_like(actor["distribution.std_param"], init_std)
-        try:
-            alg.load({"actor_state_dict": widen_inputs(actor, num_obs)}, {"actor": True}, True)
-        except RuntimeError as exc:
-            raise WarmStartError(f"init_from={source}: network does not fit ({str(exc).splitlines()[0]})") from None
-        return ckpt
     if init_std is not None and "distribution.std_param" in actor:
         actor["distribution.std_param"] = torch.full_like(actor["distribution.std_param"], init_std)
     src = source_joints(ckpt) if joints is not None else None
     if src is not None and list(src[0]) != list(joints):
+        if critic is None:  # a distilled student (pathrl.train.distill)
+            raise WarmStartError(f"init_from={source}: a distilled student must have the new robot's joints")
         if path_joints is not None and list(src[1]) != list(path_joints):
             raise WarmStartError(f"init_from={source}: path joints differ ({src[1]} vs {list(path_joints)})")
         rows = joint_rows(src[0], joints)
@@ -144,9 +136,13 @@ def warm_start(alg, source: str | Path, num_obs: int, init_std: float | None = N
         actor = widen_outputs(widen_inputs(actor, num_obs, cols), rows, len(joints), init_std)
         critic = widen_inputs(critic, num_obs, cols)
     else:
-        actor, critic = widen_inputs(actor, num_obs), widen_inputs(critic, num_obs)
+        actor = widen_inputs(actor, num_obs)
+        critic = None if critic is None else widen_inputs(critic, num_obs)
+    state = {"actor_state_dict": actor}
+    if critic is not None:  # a distilled student has none: the run's new critic stays
+        state["critic_state_dict"] = critic
     try:
-        alg.load({"actor_state_dict": actor, "critic_state_dict": critic}, {"actor": True, "critic": True}, True)
+        alg.load(state, {"actor": True, "critic": critic is not None}, True)
     except RuntimeError as exc:
         raise WarmStartError(f"init_from={source}: network does not fit ({str(exc).splitlines()[0]})") from None
     return ckpt
