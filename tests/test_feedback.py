@@ -399,3 +399,20 @@ def test_ball_drive_is_the_same_in_both_backends(iiwa):
     task = {"ball_drive": torch.tensor([0.0, 0.05, 0.2]), "ball_on_plate": torch.tensor([1.0, 1.0, 1.0])}
     q = StepQuantities(zero, zero, zero, zero, zero, zero, zero.bool(), task=task)
     assert ball_drive(q, threshold=0.1).tolist() == pytest.approx([1.0, 0.25, 0.0])
+
+
+def test_task_failure_time_and_after_end():
+    from types import SimpleNamespace
+
+    from pathrl.eval.evaluate import _task_failure
+
+    def rec(ok, finish_step):
+        return SimpleNamespace(extra={"dt": 0.1, "task_series": {"up": torch.tensor(ok)}}, finish_step=finish_step)
+
+    # the ok flag drops in the 3rd step: failed 0.3 s after the start; the end was reached in step 1 -> after it
+    f = _task_failure(rec([1.0, 1.0, 0.0, 0.0], 1), "up")
+    assert f["task_failed"] and abs(f["task_failed_at_s"] - 0.3) < 1e-12 and f["task_failed_after_end"]
+    assert not _task_failure(rec([1.0, 1.0, 0.0, 0.0], 3), "up")["task_failed_after_end"]  # same step: not after
+    assert not _task_failure(rec([1.0, 1.0, 0.0, 0.0], -1), "up")["task_failed_after_end"]  # never reached
+    assert _task_failure(rec([1.0, 1.0, 1.0], 2), "up") == {"task_failed": False, "task_failed_at_s": None,
+                                                            "task_failed_after_end": False}

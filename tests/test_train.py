@@ -8,7 +8,11 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
+
 from pathrl.logging.mcap_io import read_messages
+from pathrl.repro.figures import learning_curves
+from pathrl.train.ship import read_curve, ship
 
 ROOT = Path(__file__).resolve().parents[1]
 BIN = Path(sys.executable).parent
@@ -62,6 +66,14 @@ def test_train_resume_and_eval(tiny_dataset, tmp_path):
     topics = {t for t, _, _ in read_messages(out / "episodes.mcap")}
     assert {"/eval/robot", "/eval/reference", "/eval/joint_state", "/eval/tcp", "/eval/episode_metrics"} <= topics
 
+    # shipping keeps the learning curve: one row per iteration from run.mcap, drawn by the reproduce figure
+    dest = ship(run_dir, tmp_path / "shipped")
+    c = read_curve(dest / "curve.csv")
+    assert c["iteration"].tolist() == [0, 1, 2, 3] and c["env_steps"].tolist() == [256, 512, 768, 1024]
+    assert np.all(np.diff(c["wall_time_s"]) > 0) and "Episode_Termination/time_out" in c and "Policy/mean_std" in c
+    assert learning_curves({"a": c, "b": c}, "tiny", tmp_path / "lc.png") and (tmp_path / "lc.png").is_file()
+    assert not learning_curves({}, "none", tmp_path / "none.png") and not (tmp_path / "none.png").exists()
+
     # time-to-quality curve over the checkpoints of iterations 0, 2 (every 2) and the last one (3)
     curve = tmp_path / "curve"
     r = run([sys.executable, "tools/time_to_quality.py", "--run", str(run_dir), "--row", "iiwa7/random",
@@ -101,8 +113,8 @@ def test_run_mcap_survives_kill(tiny_dataset, tmp_path):
     r = run(train_cmd(tiny_dataset, run_dir, len(got) + 2, "resume=true"))
     assert r.returncode == 0, r.stderr[-2000:]
     assert json.loads((run_dir / "summary.json").read_text())["wall_time_s"] > killed_wall
-    iters = [m["iteration"] for m in scalars(run_dir)]
-    assert iters[-1] == len(got) + 1
+    # every iteration logged exactly once: what the killed run logged after its last checkpoint was dropped
+    assert [m["iteration"] for m in scalars(run_dir)] == list(range(len(got) + 2))
 
 
 def test_bad_inputs(tiny_dataset, tmp_path):
@@ -110,8 +122,20 @@ def test_bad_inputs(tiny_dataset, tmp_path):
     assert r.returncode == 2 and r.stderr.count("\n") == 1 and "not found" in r.stderr
     r = run([str(BIN / "pathrl-eval"), "run_dir=x", "episodes=zero"])
     assert r.returncode == 2 and "integer" in r.stderr
+    r = run([str(BIN / "pathrl-eval"), "run_dir=x", "num_envs=0"])
+    assert r.returncode == 2 and "num_envs must be >= 1" in r.stderr
     r = run(train_cmd(tmp_path / "missing_dataset", tmp_path / "r", 1))
     assert r.returncode == 2 and "error" in r.stderr
+    assert not (tmp_path / "r" / "config.yaml").exists()  # a failed start leaves nothing to block the next one
+    # values that would run and give a wrong result are one line each, and nothing is written
+    for override, msg in (("iterations=-5", "iterations must be >= 1"), ("env.num_envs=0", "env.num_envs must be"),
+                          ("env.dt=0", "env.dt must be > 0"), ("env.segments=bogus", "env.segments must be one of"),
+                          ("threads=0", "threads must be >= 1"), ("device=cuda", "no CUDA")):
+        bad = tmp_path / override.replace("=", "_")
+        r = run(train_cmd(tiny_dataset, bad, 1, override))
+        lines = r.stderr.strip().splitlines()
+        assert r.returncode == 2 and len(lines) == 1 and msg in lines[0], (override, r.stderr[-500:])
+        assert not (bad / "config.yaml").exists() and not (bad / "run.mcap").exists()
 
 
 def test_ball_task_warm_start_train_and_pybullet_eval(tiny_dataset, tmp_path):

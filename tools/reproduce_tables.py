@@ -35,7 +35,7 @@ import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-from pathrl.repro.figures import pareto_table_ii, path_overlay  # noqa: E402
+from pathrl.repro.figures import CURVES, learning_curves, pareto_table_ii, path_overlay  # noqa: E402
 from pathrl.repro.render import render_latex, render_markdown  # noqa: E402
 from pathrl.repro.tables import (  # noqa: E402
     CONTROLLER_MODELS,
@@ -47,6 +47,7 @@ from pathrl.repro.tables import (  # noqa: E402
     baselines,
     evaluations,
 )
+from pathrl.train.ship import read_curve  # noqa: E402
 
 BIN = Path(sys.executable).parent
 PAPER = yaml.safe_load((ROOT / "tools" / "paper_tables.yaml").read_text())
@@ -306,6 +307,10 @@ def write_outputs(lay: Layout, profile: Profile) -> str:
         mcap = lay.out / "raw" / eid / "episodes.mcap"
         if eid in res["evaluations"] and mcap.is_file():
             path_overlay(mcap, res["evaluations"][eid], title, figs / f"paths_{eid}.png")
+    for name, (title, models) in CURVES.items():
+        files = {m: lay.models / m / "curve.csv" for m in models}
+        curves = {m: read_curve(f) for m, f in files.items() if f.is_file()}
+        learning_curves(curves, title, figs / f"learning_curve_{name}.png")
     return md
 
 

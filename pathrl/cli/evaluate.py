@@ -75,6 +75,9 @@ def _main(argv: list[str]) -> None:
     episodes = _int(args, "episodes", None)
     if episodes is not None and episodes < 1:
         raise UserError(f"episodes must be >= 1, got {episodes}")
+    num_envs = _int(args, "num_envs", 1200)
+    if num_envs is None or num_envs < 1:
+        raise UserError(f"num_envs must be >= 1, got {args.get('num_envs')}")
     run_dir = Path(args["run_dir"])
     dataset_path = args.get("dataset.path")
     if "dataset" in args:
@@ -86,7 +89,7 @@ def _main(argv: list[str]) -> None:
     try:
         m = evaluate(run_dir, dataset_path, args.get("split", "test"), episodes, segments,
                      _int(args, "seed", 0) or 0, Path(args["out"]) if "out" in args else None,
-                     num_envs=_int(args, "num_envs", 1200) or 1200,
+                     num_envs=num_envs,
                      record=flags["record"], task=args.get("task"), backend=args.get("backend", "pybullet"),
                      compile_limits=flags["compile_limits"], open_loop=flags["open_loop"],
                      checkpoint=args.get("checkpoint"))

@@ -109,6 +109,27 @@ class TrackingEnvCfg:
     posture_omega: float = 3.0  # free_joint_actions=posture: natural frequency of the pull to the start posture (rad/s)
     autoreset: bool = True
 
+    def __post_init__(self) -> None:
+        """Refuse values that would run but give a wrong result (one-line ValueError naming the key)."""
+        for key in ("num_envs", "substeps", "n_state"):
+            if int(getattr(self, key)) < 1:
+                raise ValueError(f"env.{key} must be >= 1, got {getattr(self, key)}")
+        for key in ("dt", "control_rate", "episode_budget_s", "posture_omega", "stop_tolerance"):
+            if not float(getattr(self, key)) > 0.0:  # also refuses NaN
+                raise ValueError(f"env.{key} must be > 0, got {getattr(self, key)}")
+        for key, allowed in (("segments", ("paper", "full")), ("knot_obs", ("relative", "absolute")),
+                             ("free_joint_actions", ("centred", "posture", "linear"))):
+            if getattr(self, key) not in allowed:
+                raise ValueError(f"env.{key} must be one of {', '.join(allowed)}; got {getattr(self, key)!r}")
+        lo, hi = (float(x) for x in self.start_range)
+        if not 0.0 <= lo <= hi < 1.0 or not 0.0 < self.min_fraction <= 1.0:
+            raise ValueError(f"env.start_range must be 0 <= lo <= hi < 1 and env.min_fraction in (0, 1]; got "
+                             f"{list(self.start_range)}, {self.min_fraction}")
+        for key in ("max_deviation", "end_tolerance", "knot_gap_norm"):
+            v = getattr(self, key)
+            if v is not None and not float(v) > 0.0:
+                raise ValueError(f"env.{key} must be > 0 or null, got {v}")
+
 
 TERMINATION_REASONS = ("robot_stopped", "deviation", "task_failed", "time_out")
 FREE_JOINT_ACTIONS = ("centred", "posture", "linear")

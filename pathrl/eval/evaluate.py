@@ -209,6 +209,7 @@ def _finish(records, rollout_s, env, robot, paths, ds_path, split, segments, see
         metrics["task"] = {"name": t["name"], "backend": backend, "observed": t["observe"], "open_loop": open_loop}
         metrics["task_failed_pct"] = 100.0 * float(np.mean([p["task_failed"] for p in per_episode]))
         metrics[FAILURE_METRIC[t["feedback"]]] = metrics["task_failed_pct"]
+        metrics["task_failed_after_end_pct"] = 100.0 * float(np.mean([p["task_failed_after_end"] for p in per_episode]))
     metrics["eval_wall_time_s"] = time.perf_counter() - t0 + rollout_s
     metrics["rollout_wall_time_s"] = rollout_s
     metrics["run_dir"] = str(run_dir)
@@ -245,10 +246,20 @@ def _episode_metrics(r: EpisodeRecord, dev: dict[str, float], env: PathTrackingE
         "termination": r.termination,
         "terminated_early": r.termination != "robot_stopped",
         # the task's ok flag (ball on the plate, robot upright) is sticky: 0 at the end <=> it failed at some point
-        **({"task_failed": r.extra["task"][env.feedback.ok_value] < 0.5} if r.extra.get("task") else {}),
+        **(_task_failure(r, env.feedback.ok_value) if r.extra.get("task") else {}),
         **dev,
         "limit_violations": int(viol["total"]),
     }
+
+
+def _task_failure(r: EpisodeRecord, ok_value: str) -> dict[str, Any]:
+    """Whether the task failed (ball lost, robot fallen), when (s after the episode start) and whether after the
+    end of the path was reached (during the braking or the standstill that follows)."""
+    ok = r.extra["task_series"][ok_value]  # (T,) sticky: 1 until the failure
+    failed = bool(ok[-1] < 0.5)
+    step = int((ok < 0.5).nonzero()[0, 0]) + 1 if failed else None  # steps done when the failure was seen
+    return {"task_failed": failed, "task_failed_at_s": step * r.extra["dt"] if failed else None,
+            "task_failed_after_end": failed and 0 <= r.finish_step < step}
 
 
 def _aggregate(per: list[dict[str, Any]], robot: RobotSpec, dataset: str, split: str, segments: str,

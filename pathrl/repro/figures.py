@@ -1,4 +1,4 @@
-"""Figures of `make reproduce-tables`: the Table II Pareto plot and reference-vs-executed TCP paths."""
+"""Figures of `make reproduce-tables`: the Table II Pareto plot, reference-vs-executed TCP paths and learning curves."""
 
 from __future__ import annotations
 
@@ -109,3 +109,52 @@ def path_overlay(mcap_path: Path, metrics: dict[str, Any], title: str, path: Pat
     _save(fig, path)
     plt.close(fig)
     return int(pick["episode"])
+
+
+#: Learning-curve figures: name -> (title, the shipped models of one training chain in order, each warm-started
+#: from the one before).
+CURVES = {"ball": ("iiwa7 ball on a plate: controller distilled (DAgger), then PPO",
+                   ("iiwa7_ball_balancing_distill", "iiwa7_ball_balancing_finetune"))}
+
+
+def learning_curves(curves: dict[str, dict[str, np.ndarray]], title: str, path: Path,
+                    fall_key: str = "Episode_Termination/task_failed") -> bool:
+    """Training falls, end-of-path duration and action noise against env steps of one training chain.
+
+    `curves`: model -> columns of its ``curve.csv`` (:func:`pathrl.train.ship.read_curve`), in training order;
+    each model's steps continue the one before. Duration is left out where no training episode reached the end.
+    Returns False (and writes nothing) if `curves` is empty.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    if not curves:
+        return False
+    fig, axes = plt.subplots(3, 1, figsize=(7, 7), sharex=True)
+    offset = 0.0
+    for i, (model, c) in enumerate(curves.items()):
+        steps = (c["env_steps"] + offset) / 1e6
+        stopped = c.get("Episode_Termination/robot_stopped", np.ones_like(steps))
+        duration = np.where(stopped > 0, c.get("Metrics/duration_s", np.full_like(steps, np.nan)), np.nan)
+        for ax, y in zip(axes, (100.0 * c.get(fall_key, np.full_like(steps, np.nan)), duration,
+                                c.get("Policy/mean_std", np.full_like(steps, np.nan))), strict=True):
+            ax.plot(steps, y, color=f"C{i}", lw=1, label=model)
+        if i:
+            for ax in axes:
+                ax.axvline(offset / 1e6, color="0.5", ls=":", lw=1)
+        offset += float(c["env_steps"][-1])
+    axes[0].set_ylabel("training episodes\nfailed (%)")
+    axes[0].set_yscale("symlog", linthresh=1.0)
+    axes[0].set_ylim(0.0, 100.0)
+    axes[1].set_ylabel("end of path (s)")
+    axes[2].set_ylabel("action noise (std)")
+    axes[2].set_xlabel("env steps (millions)")
+    for ax in axes:
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=8)
+    fig.suptitle(title, fontsize=10)
+    _save(fig, path)
+    plt.close(fig)
+    return True

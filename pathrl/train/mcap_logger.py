@@ -7,6 +7,7 @@ every iteration, so a killed run keeps everything up to its last finished iterat
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 from typing import Any
 
@@ -21,12 +22,16 @@ class McapLogWriter(LogWriter):
     def __init__(self, log_dir: str, file_name: str = "run.mcap", run_config: dict | None = None) -> None:
         self.path = Path(log_dir) / file_name
         kept = _salvage(self.path)  # resume: keep what an earlier (possibly killed) run logged
-        self.writer = McapJsonWriter(self.path)
+        # rewrite into a temp file and rename it over the old log: a kill in between leaves the old log whole
+        tmp = self.path.with_name(f".{file_name}.tmp")
+        self.writer = McapJsonWriter(tmp)
         self._config_written = False
         for topic, t, obj in kept:
             self.writer.write(topic, obj, t)
             self._config_written |= topic == "/run/config"
         self.writer.flush()
+        os.replace(tmp, self.path)  # the open writer goes on writing to the renamed file
+        self.writer.path = self.path
         self.run_config = run_config
         self._step: int | None = None
         self._values: dict[str, float] = {}
@@ -64,3 +69,24 @@ class McapLogWriter(LogWriter):
 def _salvage(path: Path) -> list[tuple[str, int, Any]]:
     """Messages of an existing run.mcap (finished or not); the new writer then rewrites the file."""
     return list(iter_messages(path)) if path.exists() else []
+
+
+def prune_run_log(path: Path, last_iteration: int | None) -> None:
+    """Before a (re)start: keep only what belongs to the checkpoint the run starts from.
+
+    ``last_iteration`` None (no checkpoint: a fresh start) removes the log of an earlier failed or killed start;
+    otherwise scalars after that iteration (logged by a killed run after its last checkpoint, to be redone) are
+    dropped, so that every iteration is logged once. Atomic: temp file + rename.
+    """
+    if not path.exists():
+        return
+    if last_iteration is None:
+        path.unlink()
+        return
+    kept = [(t, ts, m) for t, ts, m in _salvage(path) if t != "/train/scalars" or m["iteration"] <= last_iteration]
+    tmp = path.with_name(f".{path.name}.prune.tmp")
+    w = McapJsonWriter(tmp)
+    for topic, ts, obj in kept:
+        w.write(topic, obj, ts)
+    w.close()
+    os.replace(tmp, path)

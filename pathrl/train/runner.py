@@ -22,6 +22,7 @@ from pathrl.envs.tracking import PathTrackingEnv, TrackingEnvCfg
 from pathrl.limits import kernels
 from pathrl.paths.knots import KnotStrategy
 from pathrl.robot.model import RobotSpec, load_robot
+from pathrl.train.mcap_logger import prune_run_log
 
 CHECKPOINT_RE = re.compile(r"^model_(\d+)\.pt$")
 
@@ -212,6 +213,8 @@ class PathRLRunner(OnPolicyRunner):
         return self._wall[0] + time.perf_counter() - self._wall[1]
 
     def save(self, path: str, infos: dict | None = None) -> None:
+        if self.logger.writer is not None:
+            self.logger.writer.flush()  # the checkpoint's iteration is in run.mcap before the checkpoint exists
         if self._summary is not None:
             prev = json.loads(self._summary.read_text()) if self._summary.exists() else {}
             write_json_atomic(self._summary, {**prev, "wall_time_s": self.wall_time_s()})
@@ -253,35 +256,59 @@ def latest_checkpoint(run_dir: Path) -> Path | None:
     return None if best is None else best[1]
 
 
+def _checkpoint_iteration(ckpt: Path) -> int:
+    """K of ``model_K.pt``: the iteration whose update the checkpoint holds."""
+    return int(CHECKPOINT_RE.match(ckpt.name).group(1))
+
+
 def write_json_atomic(path: Path, obj: Any) -> None:
     tmp = path.with_suffix(path.suffix + ".tmp")
     tmp.write_text(json.dumps(obj, indent=2, default=str))
     os.replace(tmp, path)
 
 
+def check_run_cfg(cfg: dict[str, Any]) -> None:
+    """Refuse run-level values that would run but give a wrong result (one-line ValueError naming the key); the
+    env's own values are checked by :class:`pathrl.envs.tracking.TrackingEnvCfg`."""
+    if int(cfg["iterations"]) < 1:
+        raise ValueError(f"iterations must be >= 1, got {cfg['iterations']}")
+    if int(cfg.get("threads", 1)) < 1:
+        raise ValueError(f"threads must be >= 1, got {cfg['threads']}")
+    device = str(cfg.get("device", "cpu"))
+    if device.startswith("cuda") and not torch.cuda.is_available():
+        raise ValueError(f"device={device} but this torch has no CUDA device; use device=cpu")
+    warm = cfg.get("critic_warmup") or {}
+    if int(warm.get("iterations") or 0) < 0:
+        raise ValueError(f"critic_warmup.iterations must be >= 0, got {warm['iterations']}")
+    for key in ("num_steps_per_env", "save_interval"):
+        if key in cfg["agent"] and int(cfg["agent"][key]) < 1:
+            raise ValueError(f"agent.{key} must be >= 1, got {cfg['agent'][key]}")
+
+
 def train(cfg: dict[str, Any], run_dir: Path, resume: bool = False) -> dict[str, Any]:
     """Train (or resume) a policy; writes config.yaml, checkpoints, run.mcap and summary.json into `run_dir`."""
+    check_run_cfg(cfg)
     torch.set_num_threads(int(cfg.get("threads", 1)))
     torch.manual_seed(int(cfg["seed"]))
     run_dir.mkdir(parents=True, exist_ok=True)
     ckpt = latest_checkpoint(run_dir)
     if ckpt is not None and not resume:
         raise FileExistsError(f"{run_dir} already holds checkpoints; pass resume=true or choose another run_dir")
-    if resume and (run_dir / "config.yaml").exists():
+    if resume and ckpt is not None and (run_dir / "config.yaml").exists():
         saved = yaml.safe_load((run_dir / "config.yaml").read_text())
         saved.setdefault("task", NO_TASK)  # runs from before tasks / warm starts existed
         saved.setdefault("init_from", None)
         diff = _config_diff(saved, cfg, ignore={"resume", "iterations", "compile_limits"})
         if diff:
             raise ValueError(f"resume with a different config ({diff}); use the same overrides or a new run_dir")
-    tmp = run_dir / "config.yaml.tmp"
-    tmp.write_text(yaml.safe_dump(cfg, sort_keys=False))
-    os.replace(tmp, run_dir / "config.yaml")
-
-    env = build_env(cfg, "train")
+    env = build_env(cfg, "train")  # bad values and data fail here, before anything is written into run_dir
     distill = cfg["agent"]["algorithm"]["class_name"] == "Distillation"
     if distill:
         env = _with_teacher(cfg, env)
+    tmp = run_dir / "config.yaml.tmp"
+    tmp.write_text(yaml.safe_dump(cfg, sort_keys=False))
+    os.replace(tmp, run_dir / "config.yaml")
+    prune_run_log(run_dir / "run.mcap", _checkpoint_iteration(ckpt) if resume and ckpt is not None else None)
     prev = json.loads((run_dir / "summary.json").read_text()) if (run_dir / "summary.json").exists() else {}
     # The observation normalizer D must be known to evaluate the policy on any other path set.
     write_json_atomic(run_dir / "summary.json",

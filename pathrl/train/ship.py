@@ -1,13 +1,16 @@
-"""Turn a training run into a shipped model directory (config, slim weights, training summary)."""
+"""Turn a training run into a shipped model directory (config, slim weights, training summary, learning curve)."""
 
 from __future__ import annotations
 
+import csv
+import io
 import json
 import os
 import shutil
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import torch
 import yaml
 
@@ -30,9 +33,53 @@ def training_stats(run_dir: Path, last_iter: int) -> dict[str, Any]:
                                     if k.startswith(("Metrics/", "Episode_Termination/"))}}
 
 
+#: Per-iteration scalars of run.mcap kept in a shipped model's ``curve.csv`` (prefixes of the rsl-rl log keys).
+CURVE_PREFIXES = ("Episode_Reward/", "Episode_Termination/", "Metrics/", "Policy/mean_std", "Train/mean_reward",
+                  "Loss/learning_rate", "Loss/behavior")
+
+
+def training_curve(run_dir: Path, last_iter: int) -> list[dict[str, float]]:
+    """One row per iteration up to `last_iter`: ``iteration``, ``env_steps`` and ``wall_time_s`` (cumulative)
+    and the logged scalars named by `CURVE_PREFIXES` (falls, reward terms, duration, noise)."""
+    from pathrl.logging.mcap_io import read_messages
+
+    cfg = yaml.safe_load((run_dir / "config.yaml").read_text())
+    per_iter = int(cfg["agent"]["num_steps_per_env"]) * int(cfg["env"]["num_envs"])
+    out, wall = [], 0.0
+    for t, _, m in read_messages(run_dir / "run.mcap"):
+        if t != "/train/scalars" or m["iteration"] > last_iter:
+            continue
+        v = m["values"]
+        wall += v.get("Perf/collection_time", 0.0) + v.get("Perf/learning_time", 0.0)
+        row = {"iteration": m["iteration"], "env_steps": (m["iteration"] + 1) * per_iter, "wall_time_s": round(wall, 2)}
+        row.update({k: v[k] for k in sorted(v) if k.startswith(CURVE_PREFIXES) and not k.endswith("/time")})
+        out.append(row)
+    return out
+
+
+def curve_csv(rows: list[dict[str, float]]) -> str:
+    """CSV text of `training_curve` rows (columns: the union of their keys; a key an iteration lacks is empty)."""
+    cols = list(dict.fromkeys(k for r in rows for k in r))
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=cols, lineterminator="\n")
+    w.writeheader()
+    for r in rows:
+        w.writerow({k: (f"{x:.6g}" if isinstance(x, float) else x) for k, x in r.items()})
+    return buf.getvalue()
+
+
+def read_curve(path: Path) -> dict[str, np.ndarray]:
+    """A shipped ``curve.csv`` as columns of floats (NaN where empty)."""
+    with open(path, newline="") as f:
+        rows = list(csv.DictReader(f))
+    if not rows:
+        raise ValueError(f"{path}: no rows")
+    return {k: np.array([float(r[k]) if r[k] not in ("", None) else np.nan for r in rows]) for k in rows[0]}
+
+
 def ship(run_dir: Path, dest: Path) -> Path:
     """Copy the run's config and last checkpoint (actor + critic weights, or a distilled student; no optimizer)
-    to `dest`."""
+    to `dest`, with its training summary and (from run.mcap) its learning curve, ``curve.csv``."""
     run_dir, dest = Path(run_dir), Path(dest)
     ckpt = latest_checkpoint(run_dir)
     if ckpt is None or not (run_dir / "config.yaml").is_file():
@@ -52,4 +99,8 @@ def ship(run_dir: Path, dest: Path) -> Path:
     summary.update(training_stats(run_dir, int(state["iter"])))
     summary["shipped_from"] = str(run_dir)
     write_json_atomic(dest / "summary.json", summary)
+    if (run_dir / "run.mcap").is_file():
+        tmp_curve = dest / "curve.csv.tmp"
+        tmp_curve.write_text(curve_csv(training_curve(run_dir, int(state["iter"]))))
+        os.replace(tmp_curve, dest / "curve.csv")
     return dest
