@@ -77,6 +77,9 @@ except ImportError:  # pragma: no cover
     _VecEnvBase = object
 
 
+FREE_JOINT_ACTIONS = ("centred", "posture", "linear")
+
+
 @dataclass(frozen=True)
 class TrackingEnvCfg:
     """Environment settings (``conf/env/*.yaml``)."""
@@ -118,7 +121,7 @@ class TrackingEnvCfg:
             if not float(getattr(self, key)) > 0.0:  # also refuses NaN
                 raise ValueError(f"env.{key} must be > 0, got {getattr(self, key)}")
         for key, allowed in (("segments", ("paper", "full")), ("knot_obs", ("relative", "absolute")),
-                             ("free_joint_actions", ("centred", "posture", "linear"))):
+                             ("free_joint_actions", FREE_JOINT_ACTIONS)):
             if getattr(self, key) not in allowed:
                 raise ValueError(f"env.{key} must be one of {', '.join(allowed)}; got {getattr(self, key)!r}")
         lo, hi = (float(x) for x in self.start_range)
@@ -132,7 +135,6 @@ class TrackingEnvCfg:
 
 
 TERMINATION_REASONS = ("robot_stopped", "deviation", "task_failed", "time_out")
-FREE_JOINT_ACTIONS = ("centred", "posture", "linear")
 
 
 @kernel(static=True)
@@ -238,9 +240,6 @@ class PathTrackingEnv(_VecEnvBase):
         if self.paths.dof != robot.path_dof:
             raise ValueError(f"paths have {self.paths.dof} joints, robot {robot.name} has {robot.path_dof} path joints")
         self.path_index = torch.as_tensor(robot.path_index, device=self.device)
-        if cfg.free_joint_actions not in FREE_JOINT_ACTIONS:
-            raise ValueError(f"env.free_joint_actions must be one of {FREE_JOINT_ACTIONS}, "
-                             f"got {cfg.free_joint_actions!r}")
         self.hold = torch.ones(robot.dof, dtype=torch.bool, device=self.device)  # joints mapped around 0
         self.hold[self.path_index] = False
         if cfg.free_joint_actions == "linear":
@@ -250,8 +249,6 @@ class PathTrackingEnv(_VecEnvBase):
         w = torch.as_tensor(robot.deviation_weights, dtype=torch.float64, device=self.device)
         self.dev_weights = w * math.sqrt(len(w) / float((w**2).sum()))
         self.max_episode_length = int(math.ceil(cfg.episode_budget_s / cfg.dt)) + 1
-        if cfg.knot_obs not in ("relative", "absolute"):
-            raise ValueError(f"env.knot_obs must be relative or absolute, got {cfg.knot_obs!r}")
         self.fk = self.tcp_box = None
         if cfg.tcp_obs:
             box = torch.as_tensor(cfg.tcp_obs_box, dtype=torch.float64, device=self.device)

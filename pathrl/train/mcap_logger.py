@@ -19,9 +19,14 @@ from pathrl.logging.mcap_io import McapJsonWriter, iter_messages
 class McapLogWriter(LogWriter):
     """Buffers the scalars of one iteration and writes them as one message when the iteration changes."""
 
-    def __init__(self, log_dir: str, file_name: str = "run.mcap", run_config: dict | None = None) -> None:
+    def __init__(self, log_dir: str, file_name: str = "run.mcap", run_config: dict | None = None,
+                 keep_through: int | None = None) -> None:
+        """``keep_through``: the iteration of the checkpoint a resume starts from. What an earlier (possibly killed)
+        run logged up to it is kept; its later scalars (to be redone) are dropped, so every iteration is logged
+        once. None (a fresh start) drops the log of an earlier failed or killed start."""
         self.path = Path(log_dir) / file_name
-        kept = _salvage(self.path)  # resume: keep what an earlier (possibly killed) run logged
+        kept = [] if keep_through is None else [(t, ts, m) for t, ts, m in _salvage(self.path)
+                                                if t != "/train/scalars" or m["iteration"] <= keep_through]
         # rewrite into a temp file and rename it over the old log: a kill in between leaves the old log whole
         tmp = self.path.with_name(f".{file_name}.tmp")
         self.writer = McapJsonWriter(tmp)
@@ -70,23 +75,3 @@ def _salvage(path: Path) -> list[tuple[str, int, Any]]:
     """Messages of an existing run.mcap (finished or not); the new writer then rewrites the file."""
     return list(iter_messages(path)) if path.exists() else []
 
-
-def prune_run_log(path: Path, last_iteration: int | None) -> None:
-    """Before a (re)start: keep only what belongs to the checkpoint the run starts from.
-
-    ``last_iteration`` None (no checkpoint: a fresh start) removes the log of an earlier failed or killed start;
-    otherwise scalars after that iteration (logged by a killed run after its last checkpoint, to be redone) are
-    dropped, so that every iteration is logged once. Atomic: temp file + rename.
-    """
-    if not path.exists():
-        return
-    if last_iteration is None:
-        path.unlink()
-        return
-    kept = [(t, ts, m) for t, ts, m in _salvage(path) if t != "/train/scalars" or m["iteration"] <= last_iteration]
-    tmp = path.with_name(f".{path.name}.prune.tmp")
-    w = McapJsonWriter(tmp)
-    for topic, ts, obj in kept:
-        w.write(topic, obj, ts)
-    w.close()
-    os.replace(tmp, path)

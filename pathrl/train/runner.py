@@ -22,7 +22,6 @@ from pathrl.envs.tracking import PathTrackingEnv, TrackingEnvCfg
 from pathrl.limits import kernels
 from pathrl.paths.knots import KnotStrategy
 from pathrl.robot.model import RobotSpec, load_robot
-from pathrl.train.mcap_logger import prune_run_log
 
 CHECKPOINT_RE = re.compile(r"^model_(\d+)\.pt$")
 
@@ -126,10 +125,12 @@ def build_env(
     return PathTrackingEnv(env_cfg, robot, paths, build_reward_terms(cfg["reward"]["terms"]), feedback)
 
 
-def rsl_train_cfg(cfg: dict[str, Any], run_dir: Path) -> dict[str, Any]:
-    """RSL-RL train cfg: the agent config verbatim plus our MCAP log writer."""
+def rsl_train_cfg(cfg: dict[str, Any], resume_from: int | None = None) -> dict[str, Any]:
+    """RSL-RL train cfg: the agent config verbatim plus our MCAP log writer, which keeps the log up to the
+    checkpoint iteration `resume_from` (None: a fresh log)."""
     agent = copy.deepcopy(cfg["agent"])
-    agent["logger"] = {"class_name": "pathrl.train.mcap_logger:McapLogWriter", "run_config": cfg}
+    agent["logger"] = {"class_name": "pathrl.train.mcap_logger:McapLogWriter", "run_config": cfg,
+                       "keep_through": resume_from}
     return agent
 
 
@@ -308,12 +309,11 @@ def train(cfg: dict[str, Any], run_dir: Path, resume: bool = False) -> dict[str,
     tmp = run_dir / "config.yaml.tmp"
     tmp.write_text(yaml.safe_dump(cfg, sort_keys=False))
     os.replace(tmp, run_dir / "config.yaml")
-    prune_run_log(run_dir / "run.mcap", _checkpoint_iteration(ckpt) if resume and ckpt is not None else None)
     prev = json.loads((run_dir / "summary.json").read_text()) if (run_dir / "summary.json").exists() else {}
     # The observation normalizer D must be known to evaluate the policy on any other path set.
     write_json_atomic(run_dir / "summary.json",
                       {**prev, "experiment": cfg["experiment"], "knot_gap_norm": env.knot_gap})
-    train_cfg = rsl_train_cfg(cfg, run_dir)
+    train_cfg = rsl_train_cfg(cfg, _checkpoint_iteration(ckpt) if resume and ckpt is not None else None)
     runner_cls = PathRLDistillationRunner if distill else PathRLRunner
     runner = runner_cls(env, train_cfg, log_dir=str(run_dir), device=cfg.get("device", "cpu"))
     if distill:

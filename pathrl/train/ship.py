@@ -17,16 +17,21 @@ import yaml
 from pathrl.train.runner import latest_checkpoint, write_json_atomic
 
 
-def training_stats(run_dir: Path, last_iter: int) -> dict[str, Any]:
-    """Iterations, env steps and wall time up to checkpoint `last_iter`, from run.mcap and the config."""
+def read_training_log(run_dir: Path, last_iter: int) -> tuple[int, list[dict[str, Any]]]:
+    """Env steps per iteration (from the config) and the ``/train/scalars`` messages of run.mcap up to checkpoint
+    `last_iter`."""
     from pathrl.logging.mcap_io import read_messages
 
     cfg = yaml.safe_load((run_dir / "config.yaml").read_text())
     per_iter = int(cfg["agent"]["num_steps_per_env"]) * int(cfg["env"]["num_envs"])
-    rows = [m for t, _, m in read_messages(run_dir / "run.mcap") if t == "/train/scalars"]
-    rows = [m for m in rows if m["iteration"] <= last_iter]
-    wall = sum(m["values"].get("Perf/collection_time", 0.0) + m["values"].get("Perf/learning_time", 0.0) for m in rows)
-    last = rows[-1]["values"] if rows else {}
+    msgs = [m for t, _, m in read_messages(run_dir / "run.mcap") if t == "/train/scalars"]
+    return per_iter, [m for m in msgs if m["iteration"] <= last_iter]
+
+
+def training_stats(per_iter: int, msgs: list[dict[str, Any]], last_iter: int) -> dict[str, Any]:
+    """Iterations, env steps and wall time up to checkpoint `last_iter` (`read_training_log`'s output)."""
+    wall = sum(m["values"].get("Perf/collection_time", 0.0) + m["values"].get("Perf/learning_time", 0.0) for m in msgs)
+    last = msgs[-1]["values"] if msgs else {}
     return {"checkpoint_iteration": last_iter, "iterations": last_iter + 1, "env_steps": (last_iter + 1) * per_iter,
             "steps_per_iteration": per_iter, "wall_time_s": round(wall, 1),
             "final_train_metrics": {k: v for k, v in last.items()
@@ -38,17 +43,11 @@ CURVE_PREFIXES = ("Episode_Reward/", "Episode_Termination/", "Metrics/", "Policy
                   "Loss/learning_rate", "Loss/behavior")
 
 
-def training_curve(run_dir: Path, last_iter: int) -> list[dict[str, float]]:
-    """One row per iteration up to `last_iter`: ``iteration``, ``env_steps`` and ``wall_time_s`` (cumulative)
-    and the logged scalars named by `CURVE_PREFIXES` (falls, reward terms, duration, noise)."""
-    from pathrl.logging.mcap_io import read_messages
-
-    cfg = yaml.safe_load((run_dir / "config.yaml").read_text())
-    per_iter = int(cfg["agent"]["num_steps_per_env"]) * int(cfg["env"]["num_envs"])
+def training_curve(per_iter: int, msgs: list[dict[str, Any]]) -> list[dict[str, float]]:
+    """One row per iteration (`read_training_log`'s output): ``iteration``, ``env_steps`` and ``wall_time_s``
+    (cumulative) and the logged scalars named by `CURVE_PREFIXES` (falls, reward terms, duration, noise)."""
     out, wall = [], 0.0
-    for t, _, m in read_messages(run_dir / "run.mcap"):
-        if t != "/train/scalars" or m["iteration"] > last_iter:
-            continue
+    for m in msgs:
         v = m["values"]
         wall += v.get("Perf/collection_time", 0.0) + v.get("Perf/learning_time", 0.0)
         row = {"iteration": m["iteration"], "env_steps": (m["iteration"] + 1) * per_iter, "wall_time_s": round(wall, 2)}
@@ -96,11 +95,12 @@ def ship(run_dir: Path, dest: Path) -> Path:
     shutil.copyfile(run_dir / "config.yaml", tmp_cfg)
     os.replace(tmp_cfg, dest / "config.yaml")
     summary = json.loads((run_dir / "summary.json").read_text()) if (run_dir / "summary.json").is_file() else {}
-    summary.update(training_stats(run_dir, int(state["iter"])))
+    per_iter, msgs = read_training_log(run_dir, int(state["iter"]))
+    summary.update(training_stats(per_iter, msgs, int(state["iter"])))
     summary["shipped_from"] = str(run_dir)
     write_json_atomic(dest / "summary.json", summary)
-    if (run_dir / "run.mcap").is_file():
+    if msgs:
         tmp_curve = dest / "curve.csv.tmp"
-        tmp_curve.write_text(curve_csv(training_curve(run_dir, int(state["iter"]))))
+        tmp_curve.write_text(curve_csv(training_curve(per_iter, msgs)))
         os.replace(tmp_curve, dest / "curve.csv")
     return dest
