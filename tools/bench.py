@@ -212,6 +212,29 @@ def _decision(robot_name: str, repeats: int) -> dict:
             "max_pct_of_step": 100 * t.max() / 0.1}
 
 
+def bench_follower(model: str, dataset: str, decisions: int = 400) -> dict:
+    """Decision latency of :class:`pathrl.deploy.Follower` (one thread): the shipped policy, the env's step and
+    the 24 setpoints, decision after decision along test paths (warm-up excluded)."""
+    from pathrl.dataset.io import load_dataset
+    from pathrl.deploy import Follower
+
+    torch.set_num_threads(1)
+    follower = Follower.load(model)
+    paths = load_dataset(dataset, follower.robot).splits["test"].knots
+    times, k = [], 0
+    follower.reset(paths[0])
+    while len(times) < decisions + 50:
+        if follower.done:
+            k += 1
+            follower.reset(paths[k % len(paths)])
+        t0 = time.perf_counter()
+        follower.decide()
+        times.append(time.perf_counter() - t0)
+    t = np.array(times[50:])
+    return {"model": model, "decisions": len(t), "mean_ms": 1e3 * t.mean(), "p99_ms": 1e3 * np.quantile(t, 0.99),
+            "max_ms": 1e3 * t.max()}
+
+
 def bench_ball_task(backend: str, num_envs: int, seconds: float, workers: int = 2) -> dict:
     """Env steps/s of the ball-on-plate task (tracking + ball feedback) with the analytic torch ball or PyBullet
     (one client per env, `workers` processes): the same MDP, so the ratio is the price of simulating physics."""
@@ -286,6 +309,9 @@ def main() -> None:
     for robot in ("iiwa7", "armar6", "armar4_legs"):
         for mode in modes:
             res[f"decision_{robot}{suffix[mode]}"] = bench_decision(robot, mode=mode)
+    for model, dataset in (("models/iiwa7_random", "datasets/iiwa7/random"),
+                           ("models/armar6_random", "datasets/armar6/random")):
+        res[f"follower_{Path(model).name}"] = bench_follower(model, dataset, 100 if quick else 400)
     main_key = f"env_iiwa7{suffix[modes[0]]}"
     res["reference_iiwa7"] = bench_reference("iiwa7", sec)
     ref_rate = res["reference_iiwa7"]["env_steps_per_s"]
@@ -349,6 +375,10 @@ def _print(res: dict, out: Path) -> None:
         d = res[k]
         t.add_row(f"policy + limits per decision, {d['robot']}, limits {d['limits']}",
                   f"{d['mean_ms']:.2f} ms (max {d['max_pct_of_step']:.1f} % of 0.1 s)")
+    for k in sorted(k for k in res if k.startswith("follower_")):
+        d = res[k]
+        t.add_row(f"pathrl.deploy.Follower.decide, {d['model']}, 1 thread",
+                  f"{d['mean_ms']:.2f} ms mean (p99 {d['p99_ms']:.2f}, max {d['max_ms']:.2f})")
     for k in ("physics_ball_on_plate", "physics_armar4_standing"):
         d = res[k]
         t.add_row(f"PyBullet {d['scene']} (one client)", f"{d['physics_steps_per_s']:,.0f} physics steps/s "

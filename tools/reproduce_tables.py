@@ -39,6 +39,7 @@ from pathrl.repro.figures import CURVES, learning_curves, pareto_table_ii, path_
 from pathrl.repro.render import render_latex, render_markdown  # noqa: E402
 from pathrl.repro.tables import (  # noqa: E402
     CONTROLLER_MODELS,
+    PATH_CHANGE,
     REALTIME,
     ROWS,
     WARM_STARTS,
@@ -166,6 +167,9 @@ def build_plan(args: argparse.Namespace, profile: Profile, lay: Layout) -> Plan:
         for key, robot, split in REALTIME:
             plan.add("timing", f"real time {key}", lambda key=key, robot=robot, split=split: realtime(
                 key, robot, split, profile, lay, args.reuse, logs))
+        for key, model, split in PATH_CHANGE:
+            plan.add("evaluate", f"path changes {key}", lambda key=key, model=model, split=split: path_change(
+                key, model, split, profile, lay, args.reuse, logs))
     return plan
 
 
@@ -195,6 +199,15 @@ def realtime(key: str, robot: str, split: str, profile: Profile, lay: Layout, re
     episodes = 5 if profile.name == "quick" else 20
     sh([sys.executable, "-m", "pathrl.eval.realtime", robot, str(lay.test_data / split), str(out),
         "--episodes", str(episodes), *([] if profile.compile_limits else ["--eager"])], logs / f"realtime_{key}.log")
+
+
+def path_change(key: str, model: str, split: str, profile: Profile, lay: Layout, reuse: bool, logs: Path) -> None:
+    out = lay.out / "raw" / f"path_change_{key.replace('/', '_')}.json"
+    if (reuse and out.is_file()) or not (lay.models / model / "model.pt").is_file():
+        return
+    episodes = 10 if profile.name == "quick" else 200
+    sh([sys.executable, "-m", "pathrl.eval.path_change", str(lay.models / model), str(lay.test_data / split),
+        str(out), "--episodes", str(episodes)], logs / f"path_change_{key.replace('/', '_')}.log")
 
 
 def train_and_ship(model: str, e: Evaluation, profile: Profile, lay: Layout, logs: Path) -> None:
@@ -255,7 +268,7 @@ def toppra(b: Baseline, profile: Profile, lay: Layout, reuse: bool, logs: Path, 
     if reuse and out.is_file():
         return
     cmd = [str(BIN / "pathrl-toppra"), f"robot={b.robot}", f"dataset.path={lay.test_data / b.robot / b.dataset}",
-           f"knots={b.knots}", f"segments={b.segments}", "seed=0", f"workers={workers}", f"out={out}"]
+           f"knots={b.knots}", f"segments={b.segments}", "seed=0", f"workers={workers}", f"out={out}", "ruckig=true"]
     if profile.episodes is not None:
         cmd.append(f"episodes={profile.episodes}")
     sh(cmd, logs / f"{b.id}.log")
@@ -278,6 +291,11 @@ def collect(lay: Layout) -> dict:
         p = lay.models / model / "summary.json"
         if p.is_file():
             res["training"][model] = json.loads(p.read_text())
+    res["path_change"] = {}
+    for key, _, _ in PATH_CHANGE:
+        p = lay.out / "raw" / f"path_change_{key.replace('/', '_')}.json"
+        if p.is_file():
+            res["path_change"][key] = json.loads(p.read_text())
     res["realtime"] = {}
     for key, _, _ in REALTIME:
         p = lay.out / "raw" / f"realtime_{key}.json"

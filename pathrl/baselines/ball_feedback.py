@@ -40,6 +40,8 @@ import torch
 from tensordict import TensorDict
 from torch import Tensor
 
+from pathrl.baselines.greedy_follower import tracking_acceleration
+from pathrl.baselines.tray_time_law import TimeLawCfg, TimeLawTable, build_time_laws
 from pathrl.envs.feedback import GRAVITY, ROLL_FACTOR, USABLE_HALF, plate_pose
 from pathrl.envs.tracking import PathTrackingEnv
 from pathrl.robot.kinematics import ForwardKinematics
@@ -66,6 +68,10 @@ class TrayControllerCfg:
     pivot: float = 1.0  # the tilt turns the plate about the ball (1) or about the plate centre (0)
     ball_height: float = 0.029  # m, height of the pivot above the plate mid-plane (a mean ball radius)
     fd_step: float = 1e-6  # rad, finite-difference step of the Jacobian
+    law_plate_acc: float = 0.0  # m/s^2: > 0 follows the path-dependent time law of tray_time_law (this plate
+    #                             acceleration bound, limit_margin) instead of the single minimum-jerk law
+    law_smooth_s: float = 0.4  # s, velocity smoothing of that law
+    tilt_feedforward: float = 0.0  # share of the tilt's own velocity / acceleration fed forward (0: none)
 
 
 def min_jerk(u: Tensor) -> Tensor:
@@ -157,6 +163,35 @@ class TrayController:
         self.tau = torch.ones(n, **f64)
         self.correction = torch.zeros(n, d, **f64)  # q_d - q_plan at the last decision's target instant
         self.half = torch.tensor(USABLE_HALF, **f64)
+        self.laws: TimeLawTable | None = None
+        if self.cfg.law_plate_acc > 0:
+            law = TimeLawCfg(plate_acc=self.cfg.law_plate_acc, limit_margin=self.cfg.limit_margin,
+                             smooth_s=self.cfg.law_smooth_s)
+            self.laws = build_time_laws(env.paths, env.limits.vel[env.path_index], env.limits.acc[env.path_index],
+                                        self._plate_numpy, law)
+        self.t_law = torch.zeros(n, **f64)  # time on the path's law at the last re-plan (path-dependent law)
+        self.s_law = torch.zeros(n, **f64)  # the law's arc length then (= the env's, up to the table's rounding)
+        self.s_geo = torch.zeros(n, **f64)  # arc length of the nearest path point to the untilted robot then
+
+    def _arc_on_path(self, q: Tensor, back: float = 0.6, ahead: float = 0.1, samples: int = 71) -> Tensor:
+        """Arc length (N,) of the point of each env's path nearest to q (N, D), searched from `back` rad
+        behind to `ahead` rad past the env's arc length, then projected onto the table's segment."""
+        env = self.env
+        grid = torch.linspace(-back, ahead, samples, dtype=torch.float64, device=env.device)
+        s = (env.s.unsqueeze(1) + grid).clamp(min=0.0).minimum(env.end_s.unsqueeze(1))
+        ref = env.paths.position_at(env.seg_path, s)  # (N, S, D)
+        k = (ref - q.unsqueeze(1)).norm(dim=2).argmin(dim=1)
+        s0 = s.gather(1, k.unsqueeze(1)).squeeze(1)
+        step = env.paths.table_step
+        p0 = env.paths.position_at(env.seg_path, s0)
+        tangent = (env.paths.position_at(env.seg_path, s0 + step) - p0) / step
+        tangent = tangent / tangent.norm(dim=1, keepdim=True).clamp(min=1e-12)
+        ds = ((q - p0) * tangent).sum(dim=1).clamp(-step, step)
+        return (s0 + ds).clamp(min=0.0).minimum(env.end_s)
+
+    def _plate_numpy(self, q) -> object:
+        """Plate centres (G, 3) of joint positions (G, D) (numpy in and out; for toppra)."""
+        return plate_pose(self.fk, torch.as_tensor(q, dtype=torch.float64, device=self.env.device))[0].cpu().numpy()
 
     # ------------------------------------------------------------------ plan
     def _plan(self, t: Tensor) -> Tensor:
@@ -164,6 +199,12 @@ class TrayController:
         env = self.env
         shape = t.shape
         view = (-1, *([1] * (t.dim() - 1)))
+        if self.laws is not None:  # the law's progress from the phase the env's arc length gives, added to
+            # where the robot is on the path (the env's arc length also counts the tilt's motion)
+            ahead = self.laws.arc_at(env.seg_path, self.t_law.view(view) + t - self.t_plan.view(view))
+            s = self.s_geo.view(view) + ahead - self.s_law.view(view)
+            q = env.paths.position_at(env.seg_path.view(view).expand(shape).reshape(-1), s.reshape(-1))
+            return q.reshape(*shape, -1)
         s = quintic(self.coef.view(*view, 6),
                     (t - self.t_plan.view(view)).clamp(min=0.0).minimum(self.tau.view(view)))[0]
         s = torch.minimum(s, env.end_s.view(view))
@@ -176,6 +217,13 @@ class TrayController:
         env = self.env
         now = env.episode_length_buf.to(torch.float64) * env.cfg.dt
         new = env.episode_length_buf == 0
+        if self.laws is not None:
+            self.correction[new] = 0.0
+            self.t_law = self.laws.time_at(env.seg_path, env.s)
+            self.s_law = self.laws.arc_at(env.seg_path, self.t_law)
+            self.s_geo = self._arc_on_path(env.pos.to(torch.float64) - self.correction)
+            self.t_plan = now
+            return
         if bool(new.any()):
             ids = new.nonzero().squeeze(1)
             self.duration[ids] = plan_durations(env, ids, self.cfg, self.fk)
@@ -199,33 +247,48 @@ class TrayController:
         return u * (c.max_ball_acc / norm.clamp(min=c.max_ball_acc))
 
     def target(self, ball_obs: Tensor) -> tuple[Tensor, Tensor, Tensor]:
-        """Desired position, velocity and acceleration (N, D) at the end of the next decision step."""
+        """Desired position, velocity and acceleration (N, D) at the end of the next decision step.
+
+        The tilted configuration is solved at that instant and ``smooth_s`` before and after it; with
+        ``tilt_feedforward`` f > 0, f times the tilt's own velocity and acceleration (central differences
+        of the three) is fed forward, so the tracking law does not lag the tilt."""
         env, c = self.env, self.cfg
         dt = env.cfg.dt
+        n, d = env.pos.shape
         t1 = (env.episode_length_buf.to(torch.float64) + 1.0) * dt
         h = c.smooth_s
-        offsets = torch.tensor([-h, 0.0, h], dtype=torch.float64, device=env.device)
-        q3 = self._plan(t1.unsqueeze(1) + offsets)  # (N, 3, D)
-        o3, r3 = plate_pose(self.fk, q3)
-        a_plate = (o3[:, 2] - 2 * o3[:, 1] + o3[:, 0]) / h**2
+        offsets = torch.tensor([-2 * h, -h, 0.0, h, 2 * h], dtype=torch.float64, device=env.device)
+        q5 = self._plan(t1.unsqueeze(1) + offsets)  # (N, 5, D)
+        o5, r5 = plate_pose(self.fk, q5)
+        a_plate = (o5[:, 2:] - 2 * o5[:, 1:-1] + o5[:, :-2]) / h**2  # (N, 3, 3) at -h, 0, h
         _, rot_now = plate_pose(self.fk, env.pos)
         u = self.ball_acceleration(ball_obs)
         u_world = rot_now[:, :, 0] * u[:, :1] + rot_now[:, :, 1] * u[:, 1:]
-        normal = tray_normal(a_plate, u_world)
-        q_plan = q3[:, 1]
+        normal = tray_normal(a_plate, u_world.unsqueeze(1).expand(n, 3, 3))
+        q_plan = q5[:, 1:4]  # (N, 3, D)
         # pivot: the ball's centre as a point of the plate; the tilt turns the plate about it
         pivot = torch.cat([ball_obs[:, 2:4] * self.half * c.pivot,
                            torch.full_like(ball_obs[:, :1], c.ball_height)], dim=1)
-        goal = o3[:, 1] + (r3[:, 1] @ pivot.unsqueeze(2)).squeeze(2)
-        q_d = q_plan + self.correction
+        goal = o5[:, 1:4] + (r5[:, 1:4] @ pivot.view(n, 1, 3, 1)).squeeze(3)
+        solve = [1] if c.tilt_feedforward == 0 else [0, 1, 2]
+        q_d = q_plan[:, solve] + self.correction.unsqueeze(1)
+        k = len(solve)
         for _ in range(int(c.ik_iters)):
-            q_d = self._tilt(q_d, goal, normal, pivot)
-        corr = q_d - q_plan
-        v_plan = (q3[:, 2] - q3[:, 0]) / (2 * h)
-        a_plan = (q3[:, 2] - 2 * q3[:, 1] + q3[:, 0]) / h**2
+            q_d = self._tilt(q_d.reshape(n * k, d), goal[:, solve].reshape(n * k, 3),
+                             normal[:, solve].reshape(n * k, 3),
+                             pivot.repeat_interleave(k, dim=0)).view(n, k, d)
+        corr = q_d[:, k // 2] - q_plan[:, 1]
+        v_plan = (q_plan[:, 2] - q_plan[:, 0]) / (2 * h)
+        a_plan = (q_plan[:, 2] - 2 * q_plan[:, 1] + q_plan[:, 0]) / h**2
         v_d = v_plan + (corr - self.correction) / dt
+        a_d = a_plan
+        if k == 3:
+            f = c.tilt_feedforward
+            tilt = q_d - q_plan  # (N, 3, D)
+            v_d = v_plan + f * (tilt[:, 2] - tilt[:, 0]) / (2 * h) + (1 - f) * (corr - self.correction) / dt
+            a_d = a_plan + f * (tilt[:, 2] - 2 * tilt[:, 1] + tilt[:, 0]) / h**2
         self.correction = corr
-        return q_d, v_d, a_plan
+        return q_d[:, k // 2], v_d, a_d
 
     def _tilt(self, q: Tensor, o_target: Tensor, normal: Tensor, pivot: Tensor) -> Tensor:
         """One damped least-squares step from q (N, D): the plate point `pivot` (N, 3, plate frame) to
@@ -248,15 +311,8 @@ class TrayController:
     def accelerations(self, ball_obs: Tensor) -> Tensor:
         """End-of-step accelerations (N, D) of the tracking law (module docstring, step 5)."""
         env = self.env
-        dt = env.cfg.dt
         q_d, v_d, a_d = self.target(ball_obs)
-        p, v, a = env.pos, env.vel, env.acc
-        # end-of-step state with linearly interpolated acceleration: q1 = A_q + dt^2/6 a1, v1 = A_v + dt/2 a1
-        a_q = p + v * dt + a * (dt * dt / 3.0)
-        a_v = v + a * (dt / 2.0)
-        w = self.cfg.track_omega
-        kq, kv = w * w, 2.0 * w
-        return (a_d + kq * (q_d - a_q) + kv * (v_d - a_v)) / (1.0 + kq * dt * dt / 6.0 + kv * dt / 2.0)
+        return tracking_acceleration(env.pos, env.vel, env.acc, q_d, v_d, a_d, env.cfg.dt, self.cfg.track_omega)
 
     def __call__(self, obs: TensorDict) -> Tensor:
         """Actions (N, D) in [-1, 1] for the env's current state; `obs` is the env's observation."""
@@ -265,25 +321,3 @@ class TrayController:
         ball = env.feedback.observe()[:, :4].to(torch.float64)
         a1 = self.accelerations(ball)
         return linear_action(a1, env.a_min, env.a_max).to(torch.float32)
-
-
-#: Model-based controllers that evaluate like a policy: ``controller: {name: ..., <cfg keys>}`` in a model
-#: directory's config.yaml (``models/iiwa7_ball_tray_controller``).
-CONTROLLERS = {"tray": (TrayController, TrayControllerCfg)}
-
-
-def make_controller(spec: dict, env: PathTrackingEnv) -> TrayController:
-    """The controller named by `spec` (``{"name": "tray", **gains}``) for `env`; ValueError on a bad spec."""
-    if not isinstance(spec, dict) or spec.get("name") not in CONTROLLERS:
-        name = spec.get("name") if isinstance(spec, dict) else spec
-        raise ValueError(f"controller: unknown name {name!r}; known: {sorted(CONTROLLERS)}")
-    cls, cfg_cls = CONTROLLERS[spec["name"]]
-    keys = {k: v for k, v in spec.items() if k != "name"}
-    known = set(cfg_cls.__dataclass_fields__)
-    unknown = sorted(set(keys) - known)
-    if unknown:
-        raise ValueError(f"controller {spec['name']}: unknown keys {unknown}; known: {sorted(known)}")
-    bad = [k for k, v in keys.items() if isinstance(v, bool) or not isinstance(v, int | float)]
-    if bad:
-        raise ValueError(f"controller {spec['name']}: {bad} must be numbers")
-    return cls(env, cfg_cls(**keys))

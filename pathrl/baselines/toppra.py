@@ -40,7 +40,7 @@ import time
 from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from scipy.interpolate import BSpline
@@ -105,6 +105,7 @@ class ToppraResult:
     jerk_violations: int = 0
     num_gridpoints: int = 0
     iterations: int = 0
+    tracked: dict[str, Any] | None = None  # the plan tracked by Ruckig (solve_plan(track=True))
 
     @property
     def limit_scale(self) -> float:
@@ -147,7 +148,7 @@ def _toppra():
     return ta
 
 
-class _SegmentPath:
+class SegmentPath:
     """q(r) = spline(u0 + r (u1 - u0)), r in [0, 1], with derivatives in r (a toppra geometric path)."""
 
     def __init__(self, spline: BSpline, u0: float, u1: float) -> None:
@@ -177,7 +178,7 @@ class _SegmentPath:
         return None
 
 
-def _as_toppra_path(seg: _SegmentPath):
+def as_toppra_path(seg: SegmentPath):
     ta = _toppra()
 
     class _Path(ta.interpolator.AbstractGeometricPath):
@@ -199,7 +200,7 @@ def _as_toppra_path(seg: _SegmentPath):
     return _Path()
 
 
-def _gridpoints(
+def segment_gridpoints(
     u_table: np.ndarray,
     s_table: np.ndarray,
     u_knots: np.ndarray,
@@ -291,11 +292,14 @@ def solve_segment(
     refine_iterations: int = REFINE_ITERATIONS,
     margin: float = MARGIN,
     keep_trajectory: bool = True,
+    start_rate: float = 0.0,
 ) -> ToppraResult:
-    """Time-optimal rest-to-rest trajectory along the path segment [start_s, end_s] (see module doc).
+    """Time-optimal trajectory along the path segment [start_s, end_s] to rest (see module doc).
 
     knots: (K, M) path knots (path joints only); limits: (M,) magnitudes, pos_limits (M, 2).
     keep_trajectory=False drops the samples (q, qd, qdd become (0, M)) to save memory.
+    start_rate: path velocity at the start (rad of arc length per s; 0: from rest). toppra reports the
+    segment infeasible if the limits cannot be kept from that velocity.
     """
     _toppra()
     import toppra.algorithm as algo
@@ -331,9 +335,9 @@ def solve_segment(
     if end_s - start_s < 1e-9:
         return result("empty", duration_s=0.0, max_joint_dev_rad=0.0)
     u0, u1 = np.interp([start_s, end_s], s_table, u_table)
-    seg = _SegmentPath(spline, u0, u1)
-    path = _as_toppra_path(seg)
-    grid = _gridpoints(u_table, s_table, chord_params(knots), start_s, end_s, u0, u1, grid_step)
+    seg = SegmentPath(spline, u0, u1)
+    path = as_toppra_path(seg)
+    grid = segment_gridpoints(u_table, s_table, chord_params(knots), start_s, end_s, u0, u1, grid_step)
 
     vel_scale = acc_scale = 1.0 - margin
     tol = 1.0 + CHECK_RTOL
@@ -343,7 +347,8 @@ def solve_segment(
             constraint.JointAccelerationConstraint(acc * acc_scale),
         ]
         inst = algo.TOPPRA(cons, path, gridpoints=grid, solver_wrapper="seidel")
-        inst.compute_parameterization(0.0, 0.0)
+        sd_start = start_rate / max(float(np.linalg.norm(seg(0.0, 1))), 1e-12)  # arc length / s -> r / s
+        inst.compute_parameterization(sd_start, 0.0)
         data = inst.problem_data
         if data.return_code != ParameterizationReturnCode.Ok or data.sd_vec is None:
             return result(
@@ -355,7 +360,7 @@ def solve_segment(
             )
         ss, sdv = np.asarray(data.gridpoints), np.asarray(data.sd_vec)
         sdv = np.maximum(sdv, 0.0)
-        sdv[0] = sdv[-1] = 0.0
+        sdv[0], sdv[-1] = sd_start, 0.0
         _, _, _, duration = const_accel_eval(ss, sdv, np.zeros(1))
         t = _sample_times(duration, control_rate)
         r, rd, rdd, _ = const_accel_eval(ss, sdv, t)
@@ -434,6 +439,7 @@ def _solve_chunk(
     control_rate: float,
     keep: bool,
     grid_step: float,
+    track: bool = False,
 ) -> list[tuple[int, ToppraResult]]:
     out = []
     for task in tasks:
@@ -447,10 +453,26 @@ def _solve_chunk(
             control_rate,
             jerk_limits=limits["jerk"],
             grid_step=grid_step,
-            keep_trajectory=keep,
+            keep_trajectory=keep or track,
         )
+        if track and res.status in ("ok", "violations") and len(res.q):
+            res.tracked = ruckig_tracked(res, limits, control_rate)
+        if track and not keep:
+            res.q = res.qd = res.qdd = np.zeros((0, res.q.shape[1]))
         out.append((task.index, res))
     return out
+
+
+def ruckig_tracked(res: ToppraResult, limits: dict[str, np.ndarray | None], control_rate: float) -> dict[str, Any]:
+    """Duration, path deviation and limit violations (jerk included) of `res`'s plan tracked by Ruckig
+    (:func:`pathrl.baselines.ruckig_track.track_plan`)."""
+    from pathrl.baselines.ruckig_track import track_plan
+
+    tr = track_plan(res.q, res.qd, limits["vel"], limits["acc"], limits["jerk"], limits["pos"], control_rate)
+    viol = _violations(tr.q, tr.qd, tr.qdd, limits["pos"], limits["vel"], limits["acc"], limits["jerk"],
+                       control_rate)
+    return {"duration_s": tr.duration_s, "max_dev_rad": tr.max_dev_rad, "mean_dev_rad": tr.mean_dev_rad,
+            "violations": viol}
 
 
 def _worker_init() -> None:
@@ -484,8 +506,10 @@ def solve_plan(
     keep_trajectory: bool = True,
     grid_step: float = GRID_STEP,
     chunk_size: int = 4,
+    track: bool = False,
 ) -> list[ToppraResult]:
-    """Solve every episode of `plan` (in plan order, independent of `workers`)."""
+    """Solve every episode of `plan` (in plan order, independent of `workers`); `track`: also track each plan
+    with Ruckig (``ToppraResult.tracked``)."""
     if paths.dof != robot.path_dof:
         raise ValueError(
             f"paths have {paths.dof} joints, robot {robot.name!r} has {robot.path_dof} path joints"
@@ -516,7 +540,7 @@ def solve_plan(
         job = bar.add_task("solve", total=len(tasks))
         if workers <= 1 or len(chunks) <= 1:
             for chunk in chunks:
-                for i, res in _solve_chunk(chunk, limits, control_rate, keep_trajectory, grid_step):
+                for i, res in _solve_chunk(chunk, limits, control_rate, keep_trajectory, grid_step, track):
                     results[i] = res
                 bar.advance(job, len(chunk))
         else:
@@ -525,7 +549,7 @@ def solve_plan(
             ctx = mp.get_context("spawn")
             with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_worker_init) as pool:
                 futures = [
-                    pool.submit(_solve_chunk, chunk, limits, control_rate, keep_trajectory, grid_step)
+                    pool.submit(_solve_chunk, chunk, limits, control_rate, keep_trajectory, grid_step, track)
                     for chunk in chunks
                 ]
                 from concurrent.futures import as_completed

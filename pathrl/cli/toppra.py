@@ -82,8 +82,20 @@ def summarize(results, plan, paths, meta: dict[str, Any]) -> dict[str, Any]:
                 "max_jerk": _num(r.max_jerk),
                 "iterations": r.iterations,
                 "num_gridpoints": r.num_gridpoints,
+                **({"ruckig": r.tracked} if r.tracked is not None else {}),
             }
         )
+    tracked = [r.tracked for r in solved if r.tracked is not None]
+    ruckig = {} if not tracked else {"ruckig": {
+        "note": "the TOPP-RA plan tracked by Ruckig every control cycle under the velocity, acceleration and "
+                "jerk limits (pathrl.baselines.ruckig_track)",
+        "duration_s": _num(_mean([t["duration_s"] for t in tracked])),
+        "max_dev_rad": _num(_mean([t["max_dev_rad"] for t in tracked])),
+        "mean_dev_rad": _num(_mean([t["mean_dev_rad"] for t in tracked])),
+        "limit_violations_by_kind": {k: int(sum(t["violations"].get(k, 0) for t in tracked))
+                                     for k in (*VIOLATION_KEYS, "jerk")},
+        "episodes_with_violations": int(sum(sum(t["violations"].values()) > 0 for t in tracked)),
+    }}
     return {
         **meta,
         "episodes": len(results),
@@ -108,6 +120,7 @@ def summarize(results, plan, paths, meta: dict[str, Any]) -> dict[str, Any]:
             "mean_ratio_to_limit": _num(_mean(jerk_ratio)),
             "episodes_over_jerk_limit": int(sum(r.jerk_violations > 0 for r in solved)),
         },
+        **ruckig,
         "per_path": per_path,
     }
 
@@ -141,6 +154,12 @@ def print_summary(report: dict[str, Any], out: Path) -> None:
     row("max jerk / limit (not enforced)", f(report["max_jerk"]["max_ratio_to_limit"], ".1f"))
     solve = report["solve_time_s"]
     row("mean solve time [ms]", f(None if solve is None else solve * 1e3, ".1f"))
+    if "ruckig" in report:
+        rk = report["ruckig"]
+        row("tracked by Ruckig: mean duration [s]", f(rk["duration_s"], ".3f"))
+        row("tracked by Ruckig: mean max joint deviation [rad]", f(rk["max_dev_rad"], ".3f"))
+        row("tracked by Ruckig: violations (pos, vel, acc, jerk)",
+            ", ".join(str(v) for v in rk["limit_violations_by_kind"].values()))
     Console().print(table)
     print(f"wrote {out}")
 
@@ -192,6 +211,7 @@ def main_(argv: list[str]) -> dict[str, Any]:
         progress=True,
         control_rate=float(cfg.control_rate),
         keep_trajectory=False,
+        track=bool(cfg.ruckig),
     )
     meta = {
         "robot": robot.name,

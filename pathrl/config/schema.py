@@ -86,6 +86,7 @@ class ToppraAppCfg:
     control_rate: float = 240.0
     workers: int = 1
     out: str | None = None
+    ruckig: bool = False  # also track each plan with Ruckig under the jerk limits (pathrl.baselines.ruckig_track)
 
 
 @dataclass

@@ -14,7 +14,7 @@ import torch
 import yaml
 from rsl_rl.models import MLPModel
 
-from pathrl.baselines.ball_feedback import make_controller
+from pathrl.baselines.controllers import make_controller
 from pathrl.dataset.io import load_pathset
 from pathrl.envs.feedback import FrozenSensor
 from pathrl.envs.rewards import build_reward_terms
@@ -117,7 +117,7 @@ def evaluate(
     ``open_loop``: the task's sensor stays at its first value of each episode (:class:`FrozenSensor`).
     ``checkpoint``: a checkpoint file name in `run_dir` (e.g. ``model_99.pt``) instead of the latest one.
     A model-based controller's directory (``controller:`` in its config,
-    :func:`pathrl.baselines.ball_feedback.make_controller`) evaluates like a policy.
+    :func:`pathrl.baselines.controllers.make_controller`) evaluates like a policy.
     """
     torch.set_num_threads(int(os.environ.get("PATHRL_THREADS", "1")))
     cfg, ckpt, summary = load_run(run_dir)

@@ -114,7 +114,9 @@ def path_overlay(mcap_path: Path, metrics: dict[str, Any], title: str, path: Pat
 #: Learning-curve figures: name -> (title, the shipped models of one training chain in order, each warm-started
 #: from the one before).
 CURVES = {"ball": ("iiwa7 ball on a plate: controller distilled (DAgger), then PPO",
-                   ("iiwa7_ball_balancing_distill", "iiwa7_ball_balancing_finetune"))}
+                   ("iiwa7_ball_balancing_distill", "iiwa7_ball_balancing_finetune")),
+          "ball_path_law": ("iiwa7 ball on a plate: path-law controller distilled (DAgger), then PPO",
+                            ("iiwa7_ball_balancing_distill_law", "iiwa7_ball_balancing_finetune_law"))}
 
 
 def learning_curves(curves: dict[str, dict[str, np.ndarray]], title: str, path: Path,

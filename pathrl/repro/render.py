@@ -12,15 +12,18 @@ from typing import Any
 from pathrl.repro.tables import (
     AUTHORS_BUDGETS,
     PAPER_TABLE,
+    PATH_CHANGE,
     REALTIME,
     ROWS,
     SHORT_COLUMNS,
+    TABLE_GREEDY,
     TABLE_I,
     TABLE_I_TEST2,
     TABLE_II,
     TABLE_III,
     TABLE_IV,
     TABLE_IX,
+    TABLE_PATH_CHANGE,
     TABLE_V,
     TABLE_VI,
     TABLE_VII,
@@ -98,11 +101,21 @@ def _table_vi(results: dict[str, Any], paper: dict[str, Any]) -> tuple[list[str]
     lines = ["## Table VI: TOPP-RA on the same segments", "",
              "Relative duration = TOPP-RA duration / learned duration (%). Our TOPP-RA honours the velocity and "
              "acceleration limits exactly (checked at 240 Hz). *paper learned / our TOPP-RA* sets the paper's "
-             "learned duration (Table I) against our TOPP-RA on our test split, the bar a policy here has to meet.",
+             "learned duration (Table I) against our TOPP-RA on our test split, the bar a policy here has to meet. "
+             "TOPP-RA has no jerk limit: *+ Ruckig* is its plan tracked every control cycle by Ruckig under the "
+             "velocity, acceleration and jerk limits (what a jerk-limited robot gets from the plan; "
+             "`pathrl/baselines/ruckig_track.py`): its duration, its largest distance from the path (mean over the "
+             "segments, rad) and its limit violations (position / jerk). *Greedy*: a non-learned follower through the "
+             "same valid acceleration range "
+             "(`pathrl/baselines/greedy_follower.py`: per decision the candidate speed with the most progress within "
+             "a deviation bound, capped by the curvature ahead), its duration, mean Cartesian deviation and "
+             "limit violations on the learned policy's segments.",
              "",
              "| row | TOPP-RA duration (s) | relative duration (%) | TOPP-RA max joint dev (rad) | "
-             "learned / TOPP-RA | paper learned / our TOPP-RA |",
-             "|---|---|---|---|---|---|"]
+             "learned / TOPP-RA | paper learned / our TOPP-RA | + Ruckig duration (s) | + Ruckig max joint dev "
+             "(rad) | learned / (+ Ruckig) | + Ruckig violations (pos / jerk) | greedy duration (s) | greedy "
+             "cart. dev mean (cm) | learned / greedy | greedy violations |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     csv_rows: list[list[str]] = []
     for row in (r for r in ROWS if r.table == TABLE_I):
         pv = p6.get(row.key, [None, None, None])
@@ -113,10 +126,21 @@ def _table_vi(results: dict[str, Any], paper: dict[str, Any]) -> tuple[list[str]
         ratio = "–" if rel is None else f"**{100.0 / rel:.2f}** / {_fmt(None if pv[1] is None else 100.0 / pv[1])}"
         paper_dur = dict(zip(p1["columns"], p1["rows"][row.key], strict=True))["duration_s"]
         bar = "–" if td is None else f"{paper_dur / td:.2f}"
+        rk = (tp or {}).get("ruckig") or {}
+        rd = rk.get("duration_s")
+        rk_ratio = "–" if (m is None or rd is None) else f"**{m['duration_s'] / rd:.2f}**"
+        kinds = rk.get("limit_violations_by_kind") or {}
+        rk_viol = "–" if not kinds else f"{kinds.get('position', 0)} / {kinds.get('jerk', 0)}"
+        g = _metrics(results, next(r for r in ROWS if r.table == TABLE_GREEDY and r.key == row.key)) or {}
+        gd = g.get("duration_s")
+        g_ratio = "–" if (m is None or gd is None) else f"**{m['duration_s'] / gd:.2f}**"
         lines.append(f"| {row.key} | {_cell(td, pv[0], 2)} | {_cell(rel, pv[1], 1)} | {_cell(dev, pv[2], 4)} | "
-                     f"{ratio} | {bar} |")
+                     f"{ratio} | {bar} | {_fmt(rd)} | {_fmt(rk.get('max_dev_rad'), 3)} | {rk_ratio} | {rk_viol} | "
+                     f"{_fmt(gd)} | {_fmt(g.get('cart_pos_dev_mean_cm'))} | {g_ratio} | "
+                     f"{g.get('limit_violations', '–')} |")
         for name, ours, pap in (("toppra_duration_s", td, pv[0]), ("toppra_relative_duration_pct", rel, pv[1]),
-                                ("toppra_max_joint_dev_rad", dev, pv[2])):
+                                ("toppra_max_joint_dev_rad", dev, pv[2]), ("toppra_ruckig_duration_s", rd, None),
+                                ("greedy_duration_s", gd, None)):
             csv_rows.append([TABLE_VI, row.key, name, "" if ours is None else f"{ours:.6g}",
                              "" if pap is None else f"{pap:g}"])
     return lines, csv_rows
@@ -147,6 +171,41 @@ def _table_ix(results: dict[str, Any], paper: dict[str, Any]) -> tuple[list[str]
                          f"{_fmt(b['decision_ms_mean'])} / {_fmt(b['decision_ms_max'])} | {b['episodes']} |")
         csv_rows.append([TABLE_IX, key, "max_compute_to_duration_pct", "" if ours is None else f"{ours:.6g}",
                          "" if pv is None else f"{pv:g}"])
+    return lines, csv_rows
+
+
+def _path_change(results: dict[str, Any]) -> tuple[list[str], list[list[str]]]:
+    """Table of ``results["path_change"]`` (pathrl.eval.path_change: key -> its JSON)."""
+    lines = ["## Path adjustments (not in the paper: Table V's \"path adjustments: yes\", measured)", "",
+             "`python -m pathrl.eval.path_change`: the deployable follower (`pathrl.deploy`) follows a whole test "
+             "path; 1-4 s in, the rest of the path is replaced by a branch from the moving robot whose knots shift "
+             "by a random joint offset ramped in over some arc length (gentle: 0.3 rad over 1 rad; sharp: 0.6 rad "
+             "over 0.3 rad). *Settled*: the step deviation back at the policy's 95th percentile on unchanged paths "
+             "within 2 s. TOPP-RA cannot take over a moving robot onto a new path (its start velocity must lie "
+             "along the path): it brakes to rest with the jerk-limited braking law, then re-plans from rest "
+             "(*from motion*: share of changes toppra could have started at the robot's speed along the branch).",
+             "", "| row | episodes | re-plan (ms) mean / max | peak deviation (rad) median / p95 | settled within "
+             "2 s (%) | settle (s) median / p95 | change to rest (s) | TOPP-RA brake + re-plan (s) | learned / "
+             "TOPP-RA | TOPP-RA solve (ms) | TOPP-RA from motion (%) | limit violations (learned / TOPP-RA) |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    csv_rows: list[list[str]] = []
+    for key, _, _ in PATH_CHANGE:
+        r = results.get("path_change", {}).get(key)
+        for name, v in ({} if r is None else r["variants"]).items():
+            lines.append(
+                f"| {key} {name} | {v['episodes']} | {_fmt(v['replan_ms_mean'], 1)} / {_fmt(v['replan_ms_max'], 1)} | "
+                f"{_fmt(v['dev_peak_rad_median'], 3)} / {_fmt(v['dev_peak_rad_p95'], 3)} | "
+                f"**{_fmt(v['settled_within_2s_pct'], 1)}** | {_fmt(v['settle_s_median'], 1)} / "
+                f"{_fmt(v['settle_s_p95'], 1)} | {_fmt(v['duration_after_switch_s'])} | "
+                f"{_fmt(v['toppra_duration_after_switch_s'])} | {_fmt(v['learned_over_toppra'])} | "
+                f"{_fmt(v['toppra_solve_ms_mean'], 1)} | {_fmt(v['toppra_from_motion_feasible_pct'], 1)} | "
+                f"{v['limit_violations']} / {v['toppra_violations']} |")
+            for metric in ("settled_within_2s_pct", "duration_after_switch_s", "learned_over_toppra",
+                           "limit_violations"):
+                x = v.get(metric)
+                csv_rows.append([TABLE_PATH_CHANGE, f"{key}/{name}", metric, "" if x is None else f"{x:.6g}", ""])
+        if r is None:
+            lines.append(f"| {key} | – | – | – | – | – | – | – | – | – | – | – |")
     return lines, csv_rows
 
 
@@ -202,6 +261,9 @@ def render_markdown(results: dict[str, Any], paper: dict[str, Any], profile: str
     lines += body + [""] + _table_v(paper)
     csv_rows += rows
     body, rows = _table_ix(results, paper)
+    lines += [""] + body
+    csv_rows += rows
+    body, rows = _path_change(results)
     lines += [""] + body
     csv_rows += rows
     training = _training(results)

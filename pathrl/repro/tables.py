@@ -111,10 +111,15 @@ TABLE_VI = "table_VI_toppra_timing"
 TABLE_VII = "table_VII_ball_on_plate"
 TABLE_VIII = "table_VIII_armar4_balance"
 TABLE_IX = "table_IX_computation_time"
+TABLE_PATH_CHANGE = "path_adjustments"  # ours: Table V's "path adjustments: yes", measured
+TABLE_GREEDY = "greedy_follower"  # ours: the non-learned follower on the Table I segments (a Table VI column)
 
 #: Table IX rows: (row key, robot, test split whose segments are timed).
 REALTIME = (("iiwa7", "iiwa7", "iiwa7/random"), ("armar4_with_legs", "armar4_legs", "armar4/target_point"),
             ("armar6", "armar6", "armar6/random"))
+
+#: Path-adjustment rows (pathrl.eval.path_change): (row key, shipped model, test split).
+PATH_CHANGE = (("iiwa7/random", "iiwa7_random", "iiwa7/random"), ("armar6/random", "armar6_random", "armar6/random"))
 
 TABLE_I_ROWS: tuple[Row, ...] = (
     Row(TABLE_I, "iiwa7/random", IIWA_RANDOM),
@@ -128,8 +133,12 @@ TABLE_I_ROWS: tuple[Row, ...] = (
 #: Table I rows without a second test split (the ball-balancing paths have none yet).
 NO_SECOND_TEST_SET = frozenset({"iiwa7/ball_balancing"})
 
+#: Tables of ours alone (no counterpart in the paper); their rows feed other tables' columns.
+OURS_ONLY = frozenset({TABLE_GREEDY})
+
 ROWS: tuple[Row, ...] = (
     *TABLE_I_ROWS,
+    *(Row(TABLE_GREEDY, r.key, replace(r.evaluation, model=f"greedy_{r.evaluation.model}")) for r in TABLE_I_ROWS),
     *(Row(TABLE_I_TEST2, r.key, replace(r.evaluation, second_test_set=True)) for r in TABLE_I_ROWS
       if r.key not in NO_SECOND_TEST_SET),
     Row(TABLE_II, "length_lt_deviation", _e("iiwa7_random_length_lt_deviation", "iiwa7", "random")),
@@ -153,6 +162,12 @@ ROWS: tuple[Row, ...] = (
     Row(TABLE_VII, "distilled/open_loop", _ball("iiwa7_ball_balancing_distill", open_loop=True)),
     Row(TABLE_VII, "distilled_ppo", _ball("iiwa7_ball_balancing_finetune")),
     Row(TABLE_VII, "distilled_ppo/open_loop", _ball("iiwa7_ball_balancing_finetune", open_loop=True)),
+    # the same with the controller on the path-dependent time law (pathrl.baselines.tray_time_law)
+    Row(TABLE_VII, "model_based_feedback_path_law", _ball("iiwa7_ball_tray_law")),
+    Row(TABLE_VII, "model_based_feedback_path_law/open_loop", _ball("iiwa7_ball_tray_law", open_loop=True)),
+    Row(TABLE_VII, "distilled_path_law", _ball("iiwa7_ball_balancing_distill_law")),
+    Row(TABLE_VII, "distilled_path_law_ppo", _ball("iiwa7_ball_balancing_finetune_law")),
+    Row(TABLE_VII, "distilled_path_law_ppo/open_loop", _ball("iiwa7_ball_balancing_finetune_law", open_loop=True)),
     # free-standing ARMAR-4 in PyBullet, 200 paper segments each (a PyBullet episode costs ~1 s of CPU)
     Row(TABLE_VIII, "fixed_legs/no_balancing_reward", _e("armar4_target_point", "armar4", "target_point",
                                                          task="standing", episodes=200)),
@@ -170,10 +185,13 @@ PAPER_TABLE = {TABLE_I_TEST2: TABLE_I}
 NOT_IN_PAPER = frozenset({(TABLE_VII, "balancing_reward/open_loop"), (TABLE_VII, "model_based_feedback"),
                           (TABLE_VII, "model_based_feedback/open_loop"), (TABLE_VII, "distilled"),
                           (TABLE_VII, "distilled/open_loop"), (TABLE_VII, "distilled_ppo"),
-                          (TABLE_VII, "distilled_ppo/open_loop")})
+                          (TABLE_VII, "distilled_ppo/open_loop"), (TABLE_VII, "model_based_feedback_path_law"),
+                          (TABLE_VII, "model_based_feedback_path_law/open_loop"), (TABLE_VII, "distilled_path_law"),
+                          (TABLE_VII, "distilled_path_law_ppo"), (TABLE_VII, "distilled_path_law_ppo/open_loop")})
 
 #: Model directories that hold a model-based controller (``controller:`` in config.yaml): evaluated, not trained.
-CONTROLLER_MODELS = frozenset({"iiwa7_ball_tray_controller"})
+CONTROLLER_MODELS = frozenset({"iiwa7_ball_tray_controller", "iiwa7_ball_tray_law",
+                               *(f"greedy_{r.evaluation.model}" for r in TABLE_I_ROWS)})
 
 
 #: Rows trained from another row's policy (conf/experiment/<model>.yaml: init_from: models/<source>).
@@ -182,6 +200,7 @@ WARM_STARTS = {"iiwa7_ball_balancing_reward": "iiwa7_ball_balancing",
                "iiwa7_ball_balancing_drive": "iiwa7_ball_balancing_reward",
                "iiwa7_ball_balancing_tcp": "iiwa7_ball_balancing_reward",
                "iiwa7_ball_balancing_finetune": "iiwa7_ball_balancing_distill",
+               "iiwa7_ball_balancing_finetune_law": "iiwa7_ball_balancing_distill_law",
                "armar4_target_point_balancing": "armar4_target_point",
                "armar4_legs_target_point_balancing": "armar4_target_point"}
 

@@ -369,7 +369,7 @@ def _init_std(cfg: dict[str, Any]) -> float:
 
 def _with_teacher(cfg: dict[str, Any], env: PathTrackingEnv):
     """The env of a distillation run: its observations carry the teacher controller's actions."""
-    from pathrl.baselines.ball_feedback import make_controller
+    from pathrl.baselines.controllers import make_controller
     from pathrl.train.distill import TeacherLabels
 
     if not cfg.get("teacher"):

@@ -1,0 +1,84 @@
+"""``pathrl-export``: a shipped policy's actor (with its observation normaliser) to TorchScript and ONNX.
+
+    pathrl-export run_dir=models/iiwa7_random [out=DIR] [dataset.path=DIR] [observations=1000]
+
+Writes ``actor.pt``, ``actor.onnx`` and ``export.json`` to ``out`` (default ``<run_dir>/export``) and checks both
+exports against the PyTorch actor on `observations` states the policy visits on the test split (paper
+segments); ``dataset.path`` defaults to the run's dataset, else the committed ``datasets/<robot>/<dataset>``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+from pathrl.cli.common import UserError, run_cli
+
+USAGE = "usage: pathrl-export run_dir=RUN [out=DIR] [dataset.path=DIR] [observations=N]"
+KEYS = {"run_dir", "out", "dataset.path", "observations"}
+
+
+def _args(argv: list[str]) -> dict[str, str]:
+    args = {}
+    for a in argv:
+        if a in ("-h", "--help"):
+            print(USAGE)
+            raise SystemExit(0)
+        k, sep, v = a.partition("=")
+        if not sep or k not in KEYS:
+            raise UserError(f"unknown argument {a!r}; {USAGE}")
+        args[k] = v
+    if "run_dir" not in args:
+        raise UserError(f"run_dir is required; {USAGE}")
+    return args
+
+
+def _main(argv: list[str]) -> None:
+    from pathrl.dataset.io import DatasetError, load_pathset
+    from pathrl.deploy.export import export_policy
+    from pathrl.eval.evaluate import RunError, load_run
+    from pathrl.paths.knots import KnotStrategy
+    from pathrl.robot.model import load_robot
+    from pathrl.train.runner import env_cfg_from, task_cfg
+
+    args = _args(argv)
+    run_dir = Path(args["run_dir"])
+    try:
+        count = int(args.get("observations", "1000"))
+    except ValueError:
+        raise UserError(f"observations must be an integer, got {args['observations']!r}") from None
+    if count < 1:
+        raise UserError(f"observations must be >= 1, got {count}")
+    try:
+        cfg, ckpt, summary = load_run(run_dir)
+    except RunError as exc:
+        raise UserError(str(exc)) from None
+    if ckpt is None:
+        raise UserError(f"{run_dir}: a model-based controller has no network to export")
+    if task_cfg(cfg)["feedback"] is not None:
+        raise UserError(f"{run_dir}: exporting policies of feedback tasks ({task_cfg(cfg)['feedback']}) is not "
+                        "supported (their state needs the task's sensor)")
+    robot = load_robot(cfg["robot"])
+    ds = args.get("dataset.path") or cfg["dataset"]["path"]
+    if "dataset.path" not in args and not Path(ds).is_dir():
+        ds = str(Path("datasets") / robot.name / cfg["dataset"]["name"])
+    try:
+        paths = load_pathset(ds, "test", KnotStrategy.from_cfg(cfg["knots"]), robot=robot)
+    except (DatasetError, OSError) as exc:
+        raise UserError(str(exc).splitlines()[0] if str(exc) else repr(exc)) from None
+    env_cfg = replace(env_cfg_from(cfg, num_envs=min(8, paths.num_paths), seed=0,
+                                   knot_gap_norm=summary.get("knot_gap_norm")),
+                      autoreset=False, device="cpu", max_deviation=None, fail_terminates=False)
+    out = Path(args.get("out") or run_dir / "export")
+    try:
+        report = export_policy(cfg, ckpt, paths, env_cfg, robot, out, count)
+    except ValueError as exc:
+        raise UserError(str(exc)) from None
+    worst = max(report["max_abs_diff_torchscript"], report["max_abs_diff_onnx"])
+    print(f"{out}/actor.pt, actor.onnx: max |export - PyTorch| {worst:.1e} "
+          f"on {report['observations']} recorded observations (float32; the trained {report['hidden_dtype']} "
+          f"policy differs by {report['max_abs_diff_trained_dtype']:.1e})")
+
+
+def main(argv: list[str] | None = None) -> int:
+    return run_cli(_main, argv)

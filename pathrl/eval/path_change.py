@@ -1,0 +1,264 @@
+"""Online path adjustment, measured: the path changes while the robot moves (paper Table V, "path adjustments").
+
+Protocol (per episode, fixed seed): the robot follows a whole test path with the deployable follower
+(:class:`pathrl.deploy.Follower`). After a random time (``switch_range`` seconds) the rest of the path is
+replaced by a branch (:func:`branch`): from where the robot is, the path's remaining knots are shifted by a
+random joint offset of ``offset_rad`` that ramps in smoothly over ``ramp_rad`` of arc length (an updated goal:
+the new path starts at the robot, tangent to the old one, and ends elsewhere). The robot keeps its position,
+velocity and acceleration; the policy sees the new path from its next decision on. Measured per episode:
+
+- ``replan_ms``: wall time of the switch (building the new path) plus the first decision after it;
+- the step deviation (weighted joint distance to the reference, the env's ``dev_max``) after the switch, and
+  ``settle_s``: the time from the switch until it is back at the policy's normal tracking level
+  (:func:`tracking_level`, the 95th percentile on unchanged paths) after its largest excursion;
+- ``duration_s``: from the switch to rest at B's end; every setpoint is checked against the position,
+  velocity, acceleration and jerk limits.
+
+The re-planned TOPP-RA baseline (:func:`toppra_replan`) solves the branch from the robot's position with the
+robot's path velocity as toppra's start velocity (the branch is tangent to the old path there; the velocity's
+part normal to the branch, ``normal_speed``, is what such a re-plan cannot honour) and no jerk limit; its
+solve time is its re-plan latency.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import torch
+
+from pathrl.deploy import Follower
+from pathrl.limits.check import limit_violations
+from pathrl.limits.feasible import JointLimits
+from pathrl.paths.spline import knot_arc_lengths
+
+#: Defaults of the protocol: switch time (s), offset of the branch (rad, joint space), its ramp (rad of arc).
+SWITCH_RANGE = (1.0, 4.0)
+OFFSET_RAD = 0.3
+RAMP_RAD = 1.0
+#: The variants `main` measures: (offset_rad, ramp_rad) of the branch.
+VARIANTS = {"gentle": (OFFSET_RAD, RAMP_RAD), "sharp": (0.6, 0.3)}
+
+
+@dataclass
+class SwitchEpisode:
+    """One path change (module docstring)."""
+
+    path: int
+    switch_s: float
+    replan_ms: float
+    duration_s: float
+    reached_end: bool
+    dev_after: list[float] = field(default_factory=list)  # dev_max of each step after the switch (rad)
+    violations: int = 0
+
+    def settle_s(self, level: float, dt: float, window_s: float = 4.0) -> float:
+        """Time from the switch until the deviation is back at or below `level` after its largest excursion in
+        the first `window_s` seconds (0 if that excursion stays below `level`; inf if it never comes back)."""
+        dev = np.asarray(self.dev_after)
+        peak = int(np.argmax(dev[: max(1, int(round(window_s / dt)))]))
+        if dev[peak] <= level:
+            return 0.0
+        back = np.nonzero(dev[peak:] <= level)[0]
+        return float((peak + back[0]) * dt) if len(back) else float("inf")
+
+
+def branch(knots: np.ndarray, s_now: float, q_now: np.ndarray, v_now: np.ndarray, offset: np.ndarray, ramp: float,
+           pos_limits: np.ndarray, lead_s: float = 0.1, margin: float = 0.02) -> np.ndarray:
+    """Knots (K', M) of a path from `q_now` (moving at `v_now`: a second knot at q_now + lead_s v_now makes the
+    path start in the direction of motion) along the knots of `knots` (K, M) past arc length
+    s_now + lead_s |v_now|, shifted by w(s - s_now) `offset` (w: smoothstep from 0 to 1 over `ramp` rad) and
+    kept `margin` inside `pos_limits` (M, 2)."""
+    s_k, _ = knot_arc_lengths(knots)
+    lead = lead_s * float(np.linalg.norm(v_now))
+    keep = s_k > s_now + lead + 1e-6
+    x = np.clip((s_k[keep] - s_now) / ramp, 0.0, 1.0)
+    w = x * x * (3.0 - 2.0 * x)
+    moved = np.clip(knots[keep] + w[:, None] * offset, pos_limits[:, 0] + margin, pos_limits[:, 1] - margin)
+    start = [q_now] + ([q_now + lead_s * v_now] if lead > 1e-6 else [])
+    return np.vstack(start + [moved])
+
+
+def _switch(direction: np.ndarray, follower: Follower, knots: np.ndarray, offset_rad: float,
+            ramp_rad: float) -> np.ndarray:
+    """The branch of the follower's current path (module docstring) from its state now."""
+    idx = follower.env.path_index.numpy()
+    lim = JointLimits.from_robot(follower.robot).pos[follower.env.path_index].numpy()
+    resampled = follower.knots.apply(knots)
+    return branch(resampled, float(follower.env.s[0]), follower.state[0][idx], follower.state[1][idx],
+                  offset_rad * direction / np.linalg.norm(direction), ramp_rad, lim)
+
+
+def _run(follower: Follower, decisions: int, out: list, devs: list | None) -> None:
+    for _ in range(decisions):
+        sp = follower.decide()
+        out.append(sp)
+        if devs is not None:
+            devs.append(float(follower.env.last_step["dev_max"][0]))
+        if follower.done:
+            return
+
+
+def _violations(follower: Follower, start: tuple[np.ndarray, ...], setpoints: list) -> int:
+    p = np.vstack([start[0][None]] + [s.position for s in setpoints])
+    v = np.vstack([start[1][None]] + [s.velocity for s in setpoints])
+    a = np.vstack([start[2][None]] + [s.acceleration for s in setpoints])
+    t = lambda x: torch.as_tensor(x, dtype=torch.float64)  # noqa: E731
+    lim = JointLimits.from_robot(follower.robot)
+    return int(limit_violations(t(p), t(v), t(a), lim, 1.0 / follower.env_cfg.control_rate)["total"])
+
+
+def tracking_level(follower: Follower, knots: list[np.ndarray], episodes: int, quantile: float = 0.95) -> float:
+    """The `quantile` of the policy's step deviation (dev_max, rad) on whole paths without a change."""
+    devs: list[float] = []
+    for i in range(episodes):
+        follower.reset(knots[i % len(knots)])
+        _run(follower, 600, [], devs)
+    return float(np.quantile(devs, quantile))
+
+
+def path_change_episodes(follower: Follower, knots: list[np.ndarray], episodes: int, seed: int = 0,
+                         switch_range: tuple[float, float] = SWITCH_RANGE, offset_rad: float = OFFSET_RAD,
+                         ramp_rad: float = RAMP_RAD, max_s: float = 60.0) -> list[SwitchEpisode]:
+    """`episodes` path changes on the paths `knots` (module docstring)."""
+    rng = np.random.default_rng(seed)
+    dt = follower.env_cfg.dt
+    out = []
+    for i in range(episodes):
+        a = i % len(knots)
+        k = int(round(rng.uniform(*switch_range) / dt))
+        follower.reset(knots[a])
+        start = follower.state
+        sps: list = []
+        _run(follower, k, sps, None)
+        new = _switch(rng.standard_normal(follower.robot.path_dof), follower, knots[a], offset_rad, ramp_rad)
+        t0 = time.perf_counter()
+        follower.replace_path(new)
+        first: list = []
+        _run(follower, 1, first, None)
+        replan_ms = 1e3 * (time.perf_counter() - t0)
+        devs = [float(follower.env.last_step["dev_max"][0])]
+        after: list = []
+        _run(follower, int(max_s / dt), after, devs)
+        sps += first + after
+        out.append(SwitchEpisode(a, len(sps[:k]) * dt, replan_ms, (1 + len(after)) * dt, follower.done, devs,
+                                 _violations(follower, start, sps)))
+    return out
+
+
+def toppra_replan(follower: Follower, knots: list[np.ndarray], episodes: int, seed: int = 0,
+                  switch_range: tuple[float, float] = SWITCH_RANGE, offset_rad: float = OFFSET_RAD,
+                  ramp_rad: float = RAMP_RAD) -> list[dict]:
+    """The same changes (same seed: same paths, times and offsets) re-planned with TOPP-RA (module docstring).
+
+    ``from_motion``: toppra from the robot's speed along the branch's start (``feasible`` or not; the
+    robot's speed normal to the branch, ``normal_speed`` in rad/s, is dropped). ``brake_replan``: the robot
+    brakes to rest with the env's braking law (``braking_s``), then toppra solves the branch from there, from
+    rest: ``duration_s`` from the change to rest at the end, ``solve_ms``, ``violations`` (TOPP-RA's own; it
+    has no jerk limit).
+    """
+    from pathrl.baselines.toppra import solve_segment
+    from pathrl.paths.spline import fit_spline
+
+    rng = np.random.default_rng(seed)
+    dt = follower.env_cfg.dt
+    lim = JointLimits.from_robot(follower.robot)
+    rows = []
+    for i in range(episodes):
+        a = i % len(knots)
+        k = int(round(rng.uniform(*switch_range) / dt))
+        follower.reset(knots[a])
+        _run(follower, k, [], None)
+        direction = rng.standard_normal(follower.robot.path_dof)
+        idx = follower.env.path_index.numpy()
+        vel, acc, pos = lim.vel[idx].numpy(), lim.acc[idx].numpy(), lim.pos[idx].numpy()
+        rate = follower.env_cfg.control_rate
+        new = _switch(direction, follower, knots[a], offset_rad, ramp_rad)
+        spline = fit_spline(new)
+        tangent = spline(0.0, 1)
+        tangent = tangent / max(np.linalg.norm(tangent), 1e-12)
+        v = follower.state[1][idx]
+        along = float(v @ tangent)
+        _, length = knot_arc_lengths(new)
+        moving = solve_segment(new, 0.0, length, vel, acc, pos, rate, keep_trajectory=False,
+                               start_rate=max(along, 0.0))
+        follower.stop()
+        braking: list = []
+        _run(follower, 100, braking, None)
+        rest = _switch(direction, follower, knots[a], offset_rad, ramp_rad)
+        _, length = knot_arc_lengths(rest)
+        res = solve_segment(rest, 0.0, length, vel, acc, pos, rate, keep_trajectory=False)
+        rows.append({"path": a, "switch_s": k * dt, "from_motion_feasible": moving.status != "infeasible",
+                     "normal_speed": float(np.linalg.norm(v - along * tangent)), "braking_s": len(braking) * dt,
+                     "solve_ms": 1e3 * res.solve_time_s, "duration_s": len(braking) * dt + res.duration_s,
+                     "status": res.status, "violations": res.num_violations})
+    return rows
+
+
+def _finite(x: float) -> float | None:
+    """JSON-safe: None for inf / nan."""
+    return float(x) if np.isfinite(x) else None
+
+
+def summarize(episodes: list[SwitchEpisode], replans: list[dict], level: float, dt: float) -> dict:
+    """Aggregate of :func:`path_change_episodes` and :func:`toppra_replan` on the same changes."""
+    settle = np.array([e.settle_s(level, dt) for e in episodes])
+    peak = np.array([max(e.dev_after) for e in episodes])
+    learned = np.array([e.duration_s for e in episodes])
+    ok = [r for r in replans if r["status"] != "infeasible"]
+    topp = np.array([r["duration_s"] for r in ok])
+    return {
+        "episodes": len(episodes), "settle_level_rad": level,
+        "replan_ms_mean": float(np.mean([e.replan_ms for e in episodes])),
+        "replan_ms_max": float(np.max([e.replan_ms for e in episodes])),
+        "dev_peak_rad_median": float(np.median(peak)), "dev_peak_rad_p95": float(np.quantile(peak, 0.95)),
+        "settle_s_median": _finite(np.median(settle)), "settle_s_p95": _finite(np.quantile(settle, 0.95)),
+        "settled_within_2s_pct": float(100 * np.mean(settle <= 2.0)),
+        "duration_after_switch_s": float(learned.mean()), "reached_end_pct": float(100 * np.mean(
+            [e.reached_end for e in episodes])),
+        "limit_violations": int(sum(e.violations for e in episodes)),
+        "toppra_duration_after_switch_s": _finite(topp.mean()) if len(topp) else None,
+        "toppra_solve_ms_mean": _finite(np.mean([r["solve_ms"] for r in ok])) if ok else None,
+        "toppra_violations": int(sum(r["violations"] for r in ok)),
+        "toppra_from_motion_feasible_pct": float(100 * np.mean([r["from_motion_feasible"] for r in replans])),
+        "toppra_normal_speed_median": float(np.median([r["normal_speed"] for r in replans])),
+        "learned_over_toppra": _finite(learned.mean() / topp.mean()) if len(topp) else None,
+    }
+
+
+def main(argv: list[str] | None = None) -> None:
+    """``python -m pathrl.eval.path_change MODEL_DIR TEST_DATASET OUT.json [--episodes N] [--seed S]``."""
+    import argparse
+    import json
+    import os
+
+    from pathrl.dataset.io import load_dataset
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("model")
+    ap.add_argument("dataset")
+    ap.add_argument("out")
+    ap.add_argument("--episodes", type=int, default=200)
+    ap.add_argument("--seed", type=int, default=0)
+    args = ap.parse_args(argv)
+    torch.set_num_threads(1)
+    follower = Follower.load(args.model)
+    knots = load_dataset(args.dataset, follower.robot).splits["test"].knots
+    level = tracking_level(follower, knots, args.episodes)
+    dt = follower.env_cfg.dt
+    res: dict = {"model": args.model, "dataset": args.dataset, "seed": args.seed, "switch_range_s": SWITCH_RANGE,
+                 "variants": {}}
+    for name, (offset, ramp) in VARIANTS.items():
+        episodes = path_change_episodes(follower, knots, args.episodes, args.seed, offset_rad=offset, ramp_rad=ramp)
+        replans = toppra_replan(follower, knots, args.episodes, args.seed, offset_rad=offset, ramp_rad=ramp)
+        res["variants"][name] = {"offset_rad": offset, "ramp_rad": ramp, **summarize(episodes, replans, level, dt),
+                                 "settle_s": [_finite(e.settle_s(level, dt)) for e in episodes]}
+    tmp = f"{args.out}.tmp"
+    with open(tmp, "w") as fh:
+        json.dump(res, fh, indent=2)
+    os.replace(tmp, args.out)
+
+
+if __name__ == "__main__":
+    main()
