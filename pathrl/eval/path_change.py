@@ -37,8 +37,9 @@ from pathrl.paths.spline import knot_arc_lengths
 SWITCH_RANGE = (1.0, 4.0)
 OFFSET_RAD = 0.3
 RAMP_RAD = 1.0
-#: The variants `main` measures: (offset_rad, ramp_rad) of the branch.
-VARIANTS = {"gentle": (OFFSET_RAD, RAMP_RAD), "sharp": (0.6, 0.3)}
+#: The variants `main` measures: (offset_rad, ramp_rad) of the branch. ``none`` replaces the path by itself from the
+#: robot's position (no offset): the control for what the settle window holds without a change.
+VARIANTS = {"none": (0.0, RAMP_RAD), "gentle": (OFFSET_RAD, RAMP_RAD), "sharp": (0.6, 0.3)}
 
 
 @dataclass

@@ -180,10 +180,12 @@ def _path_change(results: dict[str, Any]) -> tuple[list[str], list[list[str]]]:
              "`python -m pathrl.eval.path_change`: the deployable follower (`pathrl.deploy`) follows a whole test "
              "path; 1-4 s in, the rest of the path is replaced by a branch from the moving robot whose knots shift "
              "by a random joint offset ramped in over some arc length (gentle: 0.3 rad over 1 rad; sharp: 0.6 rad "
-             "over 0.3 rad). *Settled*: the step deviation back at the policy's 95th percentile on unchanged paths "
-             "within 2 s. TOPP-RA cannot take over a moving robot onto a new path (its start velocity must lie "
-             "along the path): it brakes to rest with the jerk-limited braking law, then re-plans from rest "
-             "(*from motion*: share of changes toppra could have started at the robot's speed along the branch).",
+             "over 0.3 rad; none: the path replaced by itself, the control). *Settled*: the step deviation back at "
+             "the policy's 95th percentile on unchanged paths within 2 s after its largest excursion in the first "
+             "4 s (the window also holds the path's own turns: compare with *none*). TOPP-RA cannot take over a "
+             "moving robot onto a new path (its start velocity must lie along the path): it brakes to rest with "
+             "the jerk-limited braking law, then re-plans from rest (*from motion*: share of changes toppra could "
+             "have started at the robot's speed along the branch).",
              "", "| row | episodes | re-plan (ms) mean / max | peak deviation (rad) median / p95 | settled within "
              "2 s (%) | settle (s) median / p95 | change to rest (s) | TOPP-RA brake + re-plan (s) | learned / "
              "TOPP-RA | TOPP-RA solve (ms) | TOPP-RA from motion (%) | limit violations (learned / TOPP-RA) |",
