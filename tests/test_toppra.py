@@ -238,7 +238,7 @@ def test_ruckig_tracked_straight_line_against_its_analytic_time():
     no jerk-limited motion is faster than D/v + v/a + a/j = 3.6 s; the Ruckig-tracked plan keeps every limit, jerk
     included, stays on the line (to the plan's 240 Hz sample spacing) and takes at most 0.1 s more (measured:
     3.64 s)."""
-    from pathrl.baselines.toppra import ruckig_tracked
+    from pathrl.baselines.ruckig_track import ruckig_tracked
 
     v, a, j, d = 1.0, 2.0, 20.0, 3.0
     lim = {"vel": np.array([v, v]), "acc": np.array([a, a]), "jerk": np.array([j, j]),

@@ -24,8 +24,11 @@ and the limit violations of the executed samples, jerk included. On a straight l
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
+
+from pathrl.baselines.toppra import ToppraResult, limit_counts
 
 
 @dataclass(frozen=True)
@@ -97,3 +100,13 @@ def track_plan(q: np.ndarray, qd: np.ndarray, vel: np.ndarray, acc: np.ndarray, 
         j += int(d.argmin())
         dev[i] = d.min()
     return Tracked((len(p) - 1) / control_rate, float(dev.max()), float(dev.mean()), p, v, a)
+
+
+def ruckig_tracked(res: ToppraResult, limits: dict[str, np.ndarray | None], control_rate: float) -> dict[str, Any]:
+    """Duration, path deviation and limit violations (jerk included) of `res`'s plan tracked by Ruckig
+    (:func:`track_plan`)."""
+    tr = track_plan(res.q, res.qd, limits["vel"], limits["acc"], limits["jerk"], limits["pos"], control_rate)
+    viol = limit_counts(tr.q, tr.qd, tr.qdd, limits["pos"], limits["vel"], limits["acc"], limits["jerk"],
+                        control_rate)
+    return {"duration_s": tr.duration_s, "max_dev_rad": tr.max_dev_rad, "mean_dev_rad": tr.mean_dev_rad,
+            "violations": viol}

@@ -249,7 +249,7 @@ def _sample_times(duration: float, control_rate: float) -> np.ndarray:
     return np.minimum(np.arange(n + 1) / control_rate, duration)
 
 
-def _violations(
+def limit_counts(
     q: np.ndarray,
     qd: np.ndarray,
     qdd: np.ndarray,
@@ -383,7 +383,7 @@ def solve_segment(
 
     q = seg(r)
     dev = float(np.linalg.norm(q - seg(r), axis=1).max())
-    viol = _violations(q, qd, qdd, pos, vel, acc, jerk, control_rate)
+    viol = limit_counts(q, qd, qdd, pos, vel, acc, jerk, control_rate)
     jerk_abs = np.abs(np.diff(qdd, axis=0)) * control_rate if len(t) > 1 else np.zeros((1, m))
     res = result(
         "ok",
@@ -456,23 +456,13 @@ def _solve_chunk(
             keep_trajectory=keep or track,
         )
         if track and res.status in ("ok", "violations") and len(res.q):
+            from pathrl.baselines.ruckig_track import ruckig_tracked
+
             res.tracked = ruckig_tracked(res, limits, control_rate)
         if track and not keep:
             res.q = res.qd = res.qdd = np.zeros((0, res.q.shape[1]))
         out.append((task.index, res))
     return out
-
-
-def ruckig_tracked(res: ToppraResult, limits: dict[str, np.ndarray | None], control_rate: float) -> dict[str, Any]:
-    """Duration, path deviation and limit violations (jerk included) of `res`'s plan tracked by Ruckig
-    (:func:`pathrl.baselines.ruckig_track.track_plan`)."""
-    from pathrl.baselines.ruckig_track import track_plan
-
-    tr = track_plan(res.q, res.qd, limits["vel"], limits["acc"], limits["jerk"], limits["pos"], control_rate)
-    viol = _violations(tr.q, tr.qd, tr.qdd, limits["pos"], limits["vel"], limits["acc"], limits["jerk"],
-                       control_rate)
-    return {"duration_s": tr.duration_s, "max_dev_rad": tr.max_dev_rad, "mean_dev_rad": tr.mean_dev_rad,
-            "violations": viol}
 
 
 def _worker_init() -> None:
