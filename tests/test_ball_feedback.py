@@ -12,12 +12,12 @@ import torch
 from pathrl.baselines.ball_feedback import (
     TrayController,
     TrayControllerCfg,
-    linear_action,
     quintic,
     quintic_coefficients,
     tray_normal,
 )
 from pathrl.baselines.controllers import make_controller
+from pathrl.baselines.tracking import linear_action
 from pathrl.baselines.tray_time_law import TimeLawCfg, TimeLawTable, build_time_laws, tray_time_law
 from pathrl.dataset.io import load_pathset
 from pathrl.envs.feedback import GRAVITY, ROLL_FACTOR, AnalyticBall, FrozenSensor, plate_pose

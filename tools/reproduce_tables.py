@@ -12,7 +12,7 @@ Profiles:
 --train (TRAIN=1) trains every policy first (`pathrl-train +experiment=<model> resume=true`, budgets in
 conf/experiment/*.yaml; rerun to resume after an interruption) and ships it to models/<model>.
 Evaluations and TOPP-RA baselines run --jobs at a time (JOBS=N; default the CPU count, at most 8); the
-real-time measurements of Table IX run last, one at a time on the otherwise idle machine.
+real-time measurements of Table IX and the path changes run last, one at a time on the otherwise idle machine.
 
     tools/reproduce_tables.py [--profile full|quick] [--train] [--only MODEL,...] [--reuse] [--out DIR] [--jobs N]
 """
@@ -167,8 +167,8 @@ def build_plan(args: argparse.Namespace, profile: Profile, lay: Layout) -> Plan:
         for key, robot, split in REALTIME:
             plan.add("timing", f"real time {key}", lambda key=key, robot=robot, split=split: realtime(
                 key, robot, split, profile, lay, args.reuse, logs))
-        for key, model, split in PATH_CHANGE:
-            plan.add("evaluate", f"path changes {key}", lambda key=key, model=model, split=split: path_change(
+        for key, model, split in PATH_CHANGE:  # times re-plans: on the otherwise idle machine, like Table IX
+            plan.add("timing", f"path changes {key}", lambda key=key, model=model, split=split: path_change(
                 key, model, split, profile, lay, args.reuse, logs))
     return plan
 
@@ -201,13 +201,17 @@ def realtime(key: str, robot: str, split: str, profile: Profile, lay: Layout, re
         "--episodes", str(episodes), *([] if profile.compile_limits else ["--eager"])], logs / f"realtime_{key}.log")
 
 
+def path_change_file(lay: Layout, key: str) -> Path:
+    return lay.out / "raw" / f"path_change_{key.replace('/', '_')}.json"
+
+
 def path_change(key: str, model: str, split: str, profile: Profile, lay: Layout, reuse: bool, logs: Path) -> None:
-    out = lay.out / "raw" / f"path_change_{key.replace('/', '_')}.json"
+    out = path_change_file(lay, key)
     if (reuse and out.is_file()) or not (lay.models / model / "model.pt").is_file():
         return
     episodes = 10 if profile.name == "quick" else 200
     sh([sys.executable, "-m", "pathrl.eval.path_change", str(lay.models / model), str(lay.test_data / split),
-        str(out), "--episodes", str(episodes)], logs / f"path_change_{key.replace('/', '_')}.log")
+        str(out), "--episodes", str(episodes)], logs / f"{out.stem}.log")
 
 
 def train_and_ship(model: str, e: Evaluation, profile: Profile, lay: Layout, logs: Path) -> None:
@@ -293,7 +297,7 @@ def collect(lay: Layout) -> dict:
             res["training"][model] = json.loads(p.read_text())
     res["path_change"] = {}
     for key, _, _ in PATH_CHANGE:
-        p = lay.out / "raw" / f"path_change_{key.replace('/', '_')}.json"
+        p = path_change_file(lay, key)
         if p.is_file():
             res["path_change"][key] = json.loads(p.read_text())
     res["realtime"] = {}

@@ -40,7 +40,7 @@ import torch
 from tensordict import TensorDict
 from torch import Tensor
 
-from pathrl.baselines.greedy_follower import tracking_acceleration
+from pathrl.baselines.tracking import linear_action, tracking_acceleration
 from pathrl.baselines.tray_time_law import TimeLawCfg, TimeLawTable, build_time_laws
 from pathrl.envs.feedback import GRAVITY, ROLL_FACTOR, USABLE_HALF, plate_pose
 from pathrl.envs.tracking import PathTrackingEnv
@@ -71,7 +71,6 @@ class TrayControllerCfg:
     law_plate_acc: float = 0.0  # m/s^2: > 0 follows the path-dependent time law of tray_time_law (this plate
     #                             acceleration bound, limit_margin) instead of the single minimum-jerk law
     law_smooth_s: float = 0.4  # s, velocity smoothing of that law
-    tilt_feedforward: float = 0.0  # share of the tilt's own velocity / acceleration fed forward (0: none)
 
 
 def min_jerk(u: Tensor) -> Tensor:
@@ -136,13 +135,6 @@ def tray_normal(a_plate: Tensor, u: Tensor) -> Tensor:
     g = torch.tensor([0.0, 0.0, -GRAVITY], dtype=a_plate.dtype, device=a_plate.device)
     n = a_plate - g + u / ROLL_FACTOR
     return n / n.norm(dim=-1, keepdim=True)
-
-
-def linear_action(acc: Tensor, a_min: Tensor, a_max: Tensor) -> Tensor:
-    """Inverse of the env's linear action mapping: the action in [-1, 1] whose acceleration is `acc` clipped
-    into ``[a_min, a_max]``; all (N, D)."""
-    span = (a_max - a_min).clamp(min=1e-12)
-    return (2.0 * (acc - a_min) / span - 1.0).clamp(-1.0, 1.0)
 
 
 class TrayController:
@@ -247,48 +239,33 @@ class TrayController:
         return u * (c.max_ball_acc / norm.clamp(min=c.max_ball_acc))
 
     def target(self, ball_obs: Tensor) -> tuple[Tensor, Tensor, Tensor]:
-        """Desired position, velocity and acceleration (N, D) at the end of the next decision step.
-
-        The tilted configuration is solved at that instant and ``smooth_s`` before and after it; with
-        ``tilt_feedforward`` f > 0, f times the tilt's own velocity and acceleration (central differences
-        of the three) is fed forward, so the tracking law does not lag the tilt."""
+        """Desired position, velocity and acceleration (N, D) at the end of the next decision step."""
         env, c = self.env, self.cfg
         dt = env.cfg.dt
-        n, d = env.pos.shape
         t1 = (env.episode_length_buf.to(torch.float64) + 1.0) * dt
         h = c.smooth_s
-        offsets = torch.tensor([-2 * h, -h, 0.0, h, 2 * h], dtype=torch.float64, device=env.device)
-        q5 = self._plan(t1.unsqueeze(1) + offsets)  # (N, 5, D)
-        o5, r5 = plate_pose(self.fk, q5)
-        a_plate = (o5[:, 2:] - 2 * o5[:, 1:-1] + o5[:, :-2]) / h**2  # (N, 3, 3) at -h, 0, h
+        offsets = torch.tensor([-h, 0.0, h], dtype=torch.float64, device=env.device)
+        q3 = self._plan(t1.unsqueeze(1) + offsets)  # (N, 3, D)
+        o3, r3 = plate_pose(self.fk, q3)
+        a_plate = (o3[:, 2] - 2 * o3[:, 1] + o3[:, 0]) / h**2
         _, rot_now = plate_pose(self.fk, env.pos)
         u = self.ball_acceleration(ball_obs)
         u_world = rot_now[:, :, 0] * u[:, :1] + rot_now[:, :, 1] * u[:, 1:]
-        normal = tray_normal(a_plate, u_world.unsqueeze(1).expand(n, 3, 3))
-        q_plan = q5[:, 1:4]  # (N, 3, D)
+        normal = tray_normal(a_plate, u_world)
+        q_plan = q3[:, 1]
         # pivot: the ball's centre as a point of the plate; the tilt turns the plate about it
         pivot = torch.cat([ball_obs[:, 2:4] * self.half * c.pivot,
                            torch.full_like(ball_obs[:, :1], c.ball_height)], dim=1)
-        goal = o5[:, 1:4] + (r5[:, 1:4] @ pivot.view(n, 1, 3, 1)).squeeze(3)
-        solve = [1] if c.tilt_feedforward == 0 else [0, 1, 2]
-        q_d = q_plan[:, solve] + self.correction.unsqueeze(1)
-        k = len(solve)
+        goal = o3[:, 1] + (r3[:, 1] @ pivot.unsqueeze(2)).squeeze(2)
+        q_d = q_plan + self.correction
         for _ in range(int(c.ik_iters)):
-            q_d = self._tilt(q_d.reshape(n * k, d), goal[:, solve].reshape(n * k, 3),
-                             normal[:, solve].reshape(n * k, 3),
-                             pivot.repeat_interleave(k, dim=0)).view(n, k, d)
-        corr = q_d[:, k // 2] - q_plan[:, 1]
-        v_plan = (q_plan[:, 2] - q_plan[:, 0]) / (2 * h)
-        a_plan = (q_plan[:, 2] - 2 * q_plan[:, 1] + q_plan[:, 0]) / h**2
+            q_d = self._tilt(q_d, goal, normal, pivot)
+        corr = q_d - q_plan
+        v_plan = (q3[:, 2] - q3[:, 0]) / (2 * h)
+        a_plan = (q3[:, 2] - 2 * q3[:, 1] + q3[:, 0]) / h**2
         v_d = v_plan + (corr - self.correction) / dt
-        a_d = a_plan
-        if k == 3:
-            f = c.tilt_feedforward
-            tilt = q_d - q_plan  # (N, 3, D)
-            v_d = v_plan + f * (tilt[:, 2] - tilt[:, 0]) / (2 * h) + (1 - f) * (corr - self.correction) / dt
-            a_d = a_plan + f * (tilt[:, 2] - 2 * tilt[:, 1] + tilt[:, 0]) / h**2
         self.correction = corr
-        return q_d[:, k // 2], v_d, a_d
+        return q_d, v_d, a_plan
 
     def _tilt(self, q: Tensor, o_target: Tensor, normal: Tensor, pivot: Tensor) -> Tensor:
         """One damped least-squares step from q (N, D): the plate point `pivot` (N, 3, plate frame) to

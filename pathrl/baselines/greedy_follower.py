@@ -6,8 +6,8 @@ Every decision (0.1 s), per env (batched; every tensor is (N, ...)):
    the path tangent at the env's arc length s, and the fastest at which the path's curvature over the next
    ``lookahead`` rad needs at most ``curve_margin`` of the acceleration limits (|q_j''(s)| v^2 <= m a_j);
 2. for each, the target at the end of the step is the path point ``s + v_k dt`` moving at ``v_k`` along the
-   tangent; a critically damped tracking law (:func:`tracking_acceleration`, natural frequency
-   ``track_omega``) gives the end-of-step acceleration, clipped into the valid range (so every limit holds,
+   tangent; a critically damped tracking law (:func:`~pathrl.baselines.tracking.tracking_acceleration`, natural
+   frequency ``track_omega``) gives the end-of-step acceleration, clipped into the valid range (so every limit holds,
    and braking stays possible, exactly as for a policy);
 3. every candidate step is simulated with the env's own :func:`~pathrl.envs.tracking.advance` (the same
    integration, progress and deviation as the env's step), and the follower takes the candidate that moves
@@ -28,6 +28,7 @@ import torch
 from tensordict import TensorDict
 from torch import Tensor
 
+from pathrl.baselines.tracking import linear_action, tracking_acceleration
 from pathrl.envs.tracking import PathTrackingEnv, advance
 
 
@@ -40,17 +41,6 @@ class GreedyCfg:
     track_omega: float = 15.0
     lookahead: float = 1.0  # rad of arc length whose curvature caps the speed
     curve_margin: float = 0.5  # share of the acceleration limits the curvature may use at the capped speed
-
-
-def tracking_acceleration(pos: Tensor, vel: Tensor, acc: Tensor, q_d: Tensor, v_d: Tensor, a_d: Tensor, dt: float,
-                          omega: float) -> Tensor:
-    """End-of-step acceleration (N, D) of the implicit critically damped law on the end-of-step state:
-    ``a1 = a_d + kq (q_d - q1(a1)) + kv (v_d - v1(a1))`` with ``q1 = A_q + dt^2/6 a1``, ``v1 = A_v + dt/2 a1``
-    (linearly interpolated acceleration), kq = omega^2, kv = 2 omega; all (N, D)."""
-    a_q = pos + vel * dt + acc * (dt * dt / 3.0)
-    a_v = vel + acc * (dt / 2.0)
-    kq, kv = omega * omega, 2.0 * omega
-    return (a_d + kq * (q_d - a_q) + kv * (v_d - a_v)) / (1.0 + kq * dt * dt / 6.0 + kv * dt / 2.0)
 
 
 class GreedyFollower:
@@ -99,7 +89,5 @@ class GreedyFollower:
 
     def __call__(self, obs: TensorDict) -> Tensor:
         """Actions (N, D) in [-1, 1] for the env's current state (the env's linear action mapping inverted)."""
-        from pathrl.baselines.ball_feedback import linear_action
-
         env = self.env
         return linear_action(self.accelerations(), env.a_min, env.a_max).to(torch.float32)

@@ -50,6 +50,26 @@ def run_cli(main: Callable[[list[str]], Any], argv: Sequence[str] | None = None)
     return 0
 
 
+def parse_key_values(argv: Sequence[str], keys: set[str], usage: str, required: Sequence[str] = ()) -> dict[str, str]:
+    """``key=value`` arguments of a CLI that takes a fixed set of `keys` (``-h`` prints `usage`); UserError on an
+    unknown key, a word without ``=`` or a missing required key."""
+    args: dict[str, str] = {}
+    for a in argv:
+        if a in ("-h", "--help"):
+            print(usage)
+            raise SystemExit(0)
+        if "=" not in a:
+            raise UserError(f"expected key=value, got {a!r}; {usage}")
+        k, v = a.split("=", 1)
+        if k not in keys:
+            raise UserError(f"unknown argument {k!r}; known: {', '.join(sorted(keys))}")
+        args[k] = v
+    for k in required:
+        if k not in args:
+            raise UserError(f"{k} is required; {usage}")
+    return args
+
+
 def to_container(cfg: DictConfig) -> dict[str, Any]:
     """Plain dict of a resolved config (for saving and for library code that takes mappings)."""
     return OmegaConf.to_container(cfg, resolve=True)  # type: ignore[return-value]

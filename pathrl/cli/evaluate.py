@@ -16,30 +16,13 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from pathrl.cli.common import UserError, run_cli
+from pathrl.cli.common import UserError, parse_key_values, run_cli
 
 USAGE = ("usage: pathrl-eval run_dir=RUN [dataset=NAME | dataset.path=DIR] [split=test] [episodes=N] "
          "[segments=paper|full] [seed=S] [out=DIR] [record=true|false] [task=ball_on_plate|standing] "
          "[backend=pybullet|analytic] [compile_limits=true|false] [open_loop=true|false] [checkpoint=model_K.pt]")
 KEYS = {"run_dir", "dataset", "dataset.path", "split", "episodes", "segments", "seed", "out", "record", "num_envs",
         "task", "backend", "compile_limits", "open_loop", "checkpoint"}
-
-
-def parse_args(argv: list[str]) -> dict[str, str]:
-    args: dict[str, str] = {}
-    for a in argv:
-        if a in ("-h", "--help"):
-            print(USAGE)
-            raise SystemExit(0)
-        if "=" not in a:
-            raise UserError(f"expected key=value, got {a!r}; {USAGE}")
-        k, v = a.split("=", 1)
-        if k not in KEYS:
-            raise UserError(f"unknown argument {k!r}; known: {', '.join(sorted(KEYS))}")
-        args[k] = v
-    if "run_dir" not in args:
-        raise UserError(f"run_dir is required; {USAGE}")
-    return args
 
 
 def _int(args: dict[str, str], key: str, default: int | None) -> int | None:
@@ -62,7 +45,7 @@ def _main(argv: list[str]) -> None:
     from pathrl.dataset.io import DatasetError
     from pathrl.eval.evaluate import RunError, evaluate, load_run
 
-    args = parse_args(argv)
+    args = parse_key_values(argv, KEYS, USAGE, required=("run_dir",))
     segments = args.get("segments", "paper")
     if segments not in ("paper", "full"):
         raise UserError(f"segments must be paper or full, got {segments!r}")

@@ -12,25 +12,10 @@ from __future__ import annotations
 from dataclasses import replace
 from pathlib import Path
 
-from pathrl.cli.common import UserError, run_cli
+from pathrl.cli.common import UserError, parse_key_values, run_cli
 
 USAGE = "usage: pathrl-export run_dir=RUN [out=DIR] [dataset.path=DIR] [observations=N]"
 KEYS = {"run_dir", "out", "dataset.path", "observations"}
-
-
-def _args(argv: list[str]) -> dict[str, str]:
-    args = {}
-    for a in argv:
-        if a in ("-h", "--help"):
-            print(USAGE)
-            raise SystemExit(0)
-        k, sep, v = a.partition("=")
-        if not sep or k not in KEYS:
-            raise UserError(f"unknown argument {a!r}; {USAGE}")
-        args[k] = v
-    if "run_dir" not in args:
-        raise UserError(f"run_dir is required; {USAGE}")
-    return args
 
 
 def _main(argv: list[str]) -> None:
@@ -41,7 +26,7 @@ def _main(argv: list[str]) -> None:
     from pathrl.robot.model import load_robot
     from pathrl.train.runner import env_cfg_from, task_cfg
 
-    args = _args(argv)
+    args = parse_key_values(argv, KEYS, USAGE, required=("run_dir",))
     run_dir = Path(args["run_dir"])
     try:
         count = int(args.get("observations", "1000"))

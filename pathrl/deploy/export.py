@@ -41,7 +41,7 @@ def float32_actor(policy: torch.nn.Module) -> torch.nn.Module:
     return actor
 
 
-def record_observations(cfg: dict[str, Any], env: PathTrackingEnv, policy: torch.nn.Module, count: int) -> torch.Tensor:
+def record_observations(env: PathTrackingEnv, policy: torch.nn.Module, count: int) -> torch.Tensor:
     """`count` observations (count, O) of `policy` following the env's paths (paper segments, fixed seed)."""
     n = env.num_envs
     plan = evaluation_plan(env.paths, n, "paper", 0)
@@ -79,7 +79,7 @@ def export_policy(cfg: dict[str, Any], checkpoint: Path, paths: PathSet, env_cfg
 
     env = PathTrackingEnv(env_cfg, robot, paths, build_reward_terms(cfg["reward"]["terms"]))
     policy = load_policy(cfg, env, checkpoint)
-    obs = record_observations(cfg, env, policy, observations)
+    obs = record_observations(env, policy, observations)
     actor = float32_actor(policy)
     out_dir.mkdir(parents=True, exist_ok=True)
     jit_path, onnx_path = out_dir / "actor.pt", out_dir / "actor.onnx"

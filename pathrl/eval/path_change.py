@@ -81,13 +81,14 @@ def branch(knots: np.ndarray, s_now: float, q_now: np.ndarray, v_now: np.ndarray
     return np.vstack(start + [moved])
 
 
-def _switch(direction: np.ndarray, follower: Follower, knots: np.ndarray, offset_rad: float,
-            ramp_rad: float) -> np.ndarray:
-    """The branch of the follower's current path (module docstring) from its state now."""
-    idx = follower.env.path_index.numpy()
-    lim = JointLimits.from_robot(follower.robot).pos[follower.env.path_index].numpy()
-    resampled = follower.knots.apply(knots)
-    return branch(resampled, float(follower.env.s[0]), follower.state[0][idx], follower.state[1][idx],
+def _switch(direction: np.ndarray, follower: Follower, offset_rad: float, ramp_rad: float) -> np.ndarray:
+    """The branch of the follower's current path (module docstring; its knots as the follower tracks them) from
+    its state now."""
+    env = follower.env
+    idx = env.path_index.numpy()
+    lim = JointLimits.from_robot(follower.robot).pos[env.path_index].numpy()
+    current = env.paths.knots[0, : int(env.paths.num_knots[0])].numpy()
+    return branch(current, float(follower.env.s[0]), follower.state[0][idx], follower.state[1][idx],
                   offset_rad * direction / np.linalg.norm(direction), ramp_rad, lim)
 
 
@@ -133,7 +134,7 @@ def path_change_episodes(follower: Follower, knots: list[np.ndarray], episodes: 
         start = follower.state
         sps: list = []
         _run(follower, k, sps, None)
-        new = _switch(rng.standard_normal(follower.robot.path_dof), follower, knots[a], offset_rad, ramp_rad)
+        new = _switch(rng.standard_normal(follower.robot.path_dof), follower, offset_rad, ramp_rad)
         t0 = time.perf_counter()
         follower.replace_path(new)
         first: list = []
@@ -175,7 +176,7 @@ def toppra_replan(follower: Follower, knots: list[np.ndarray], episodes: int, se
         idx = follower.env.path_index.numpy()
         vel, acc, pos = lim.vel[idx].numpy(), lim.acc[idx].numpy(), lim.pos[idx].numpy()
         rate = follower.env_cfg.control_rate
-        new = _switch(direction, follower, knots[a], offset_rad, ramp_rad)
+        new = _switch(direction, follower, offset_rad, ramp_rad)
         spline = fit_spline(new)
         tangent = spline(0.0, 1)
         tangent = tangent / max(np.linalg.norm(tangent), 1e-12)
@@ -187,7 +188,7 @@ def toppra_replan(follower: Follower, knots: list[np.ndarray], episodes: int, se
         follower.stop()
         braking: list = []
         _run(follower, 100, braking, None)
-        rest = _switch(direction, follower, knots[a], offset_rad, ramp_rad)
+        rest = _switch(direction, follower, offset_rad, ramp_rad)
         _, length = knot_arc_lengths(rest)
         res = solve_segment(rest, 0.0, length, vel, acc, pos, rate, keep_trajectory=False)
         rows.append({"path": a, "switch_s": k * dt, "from_motion_feasible": moving.status != "infeasible",
