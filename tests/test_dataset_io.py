@@ -182,3 +182,36 @@ def test_load_pathset_and_cache(tmp_path, splits):
     np.testing.assert_array_equal(kept[0], splits["test"][0][1])
     with pytest.raises(DatasetError, match="no split 'val'"):
         load_pathset(dest, "val", strat)
+
+
+def test_paths_leaving_the_position_limits_are_refused_or_clipped(tmp_path, capsys):
+    import os
+    import stat
+
+    from pathrl.dataset.io import DatasetError, limit_excess, load_pathset
+    from pathrl.dataset.synthetic import smooth_paths
+    from pathrl.paths.knots import KnotStrategy
+    from pathrl.robot.model import load_robot_by_name
+
+    robot = load_robot_by_name("iiwa7")
+    paths = smooth_paths(robot, 3, 0)
+    hi = robot.pos_limits[robot.path_index][2, 1]
+    paths[1][1][5, 2] = hi + 0.003  # 3 mrad past joint 3's upper limit, as released third-party sets do
+    meta = {"robot": "iiwa7", "kind": "synthetic", "path_joints": list(robot.path_joints), "seed": 0}
+    ds = save_dataset(tmp_path / "d", {"test": paths}, meta)
+    ex = limit_excess(ds.splits["test"].knots, robot)
+    assert ex["paths_outside"] == 1 and ex["joint"] == robot.path_joints[2]
+    assert abs(ex["max_excess_rad"] - 0.003) < 1e-12
+    strategy = KnotStrategy("curvature", 0.3)
+    with pytest.raises(DatasetError, match=r"1 of 3 paths leave robot 'iiwa7'.*3 mrad.*out_of_limits=clip"):
+        load_pathset(ds.path, "test", strategy, robot=robot)
+    ps = load_pathset(ds.path, "test", strategy, robot=robot, out_of_limits="clip")
+    assert "clipped" in capsys.readouterr().err
+    assert float(ps.knots[:, :, 2].max()) <= hi
+    load_pathset(ds.path, "test", strategy)  # no robot given: nothing to check against
+    with pytest.raises(DatasetError, match="out_of_limits must be one of"):
+        load_pathset(ds.path, "test", strategy, robot=robot, out_of_limits="ignore")
+    # a new dataset directory gets the mode of any new directory, not mkdtemp's 0700
+    umask = os.umask(0)
+    os.umask(umask)
+    assert stat.S_IMODE(os.stat(ds.path).st_mode) == 0o777 & ~umask

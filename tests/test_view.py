@@ -177,7 +177,8 @@ def _no_channels(tmp: Path) -> Path:
 
 
 @pytest.mark.parametrize(
-    "case", ["missing", "not_mcap", "no_channels", "bad_ids", "unknown_id", "save_two", "worst_on_run"]
+    "case", ["missing", "not_mcap", "no_channels", "bad_ids", "unknown_id", "save_two", "worst_on_run",
+             "save_missing_dir"]
 )
 def test_bad_inputs_give_one_line_and_exit_2(case, run_dir, tmp_path, capsys):
     junk = tmp_path / "junk.mcap"
@@ -191,6 +192,7 @@ def test_bad_inputs_give_one_line_and_exit_2(case, run_dir, tmp_path, capsys):
         "unknown_id": [eps, "--episodes", "0,99"],
         "save_two": [str(run_dir), "--save", str(tmp_path / "x.rrd")],
         "worst_on_run": [str(run_dir / "run.mcap"), "--worst", "2"],
+        "save_missing_dir": [eps, "--save", str(tmp_path / "no" / "such" / "dir.rrd")],
     }[case]
     assert main(argv) == 2
     err = capsys.readouterr().err

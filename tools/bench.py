@@ -30,6 +30,7 @@ import torch  # noqa: E402
 from pathrl import native  # noqa: E402
 from pathrl.envs.rewards import build_reward_terms  # noqa: E402
 from pathrl.envs.tracking import PathTrackingEnv, TrackingEnvCfg  # noqa: E402
+from pathrl.eval.limit_fuzz import fuzz_env, fuzz_report  # noqa: E402
 from pathrl.limits import kernels  # noqa: E402
 from pathrl.paths.pathset import build_pathset  # noqa: E402
 from pathrl.robot.model import RobotSpec, load_robot_by_name  # noqa: E402
@@ -288,6 +289,8 @@ def main() -> None:
     ap.add_argument("--quick", action="store_true", help="tiny sizes (tests)")
     ap.add_argument("--limits", default="native,torch,eager",
                     help="valid-range code to measure, comma-separated: native, torch (compiled), eager")
+    ap.add_argument("--fuzz-steps", type=int, default=10_000_000,
+                    help="adversarial limit fuzz: decision steps per robot (pathrl.eval.limit_fuzz)")
     ap.add_argument("--out", default=str(ROOT / "bench" / "results.json"))
     args = ap.parse_args()
     torch.set_num_threads(1)
@@ -328,6 +331,14 @@ def main() -> None:
     with limit_code(modes[0]):
         res["ball_task_analytic"] = bench_ball_task("analytic", n, sec)
         res["ball_task_pybullet"] = bench_ball_task("pybullet", 16 if quick else 64, sec)
+    # Adversarial limit fuzz: >= --fuzz-steps decision steps per robot, every control-rate setpoint checked.
+    fuzz_envs = 256 if quick else 4096
+    fuzz_steps = -(-(20_000 if quick else args.fuzz_steps) // fuzz_envs)
+    torch.set_num_threads(2)
+    with limit_code(modes[0]):
+        for robot in ("iiwa7", "armar6", "armar4_legs"):
+            res[f"limit_fuzz_{robot}"] = fuzz_report([fuzz_env(robot, fuzz_steps, fuzz_envs, root=ROOT)])[robot]
+    torch.set_num_threads(1)
     pyb = res["ball_task_pybullet"]["env_steps_per_s"]
     res["ball_task_analytic_over_pybullet"] = res["ball_task_analytic"]["env_steps_per_s"] / pyb
     # Both sides on both cores (the PyBullet env steps its scenes in 2 worker processes): the faster 2-core setup.

@@ -21,7 +21,7 @@ import yaml
 
 from pathrl.eval.curve import Target, curve_record, evaluate_curve, first_reaching, plot_curves
 from pathrl.repro.tables import PATH_ROBOT, TABLE_I
-from pathrl.train.runner import write_json_atomic
+from pathrl.storage import write_json_atomic
 
 ROOT = Path(__file__).resolve().parents[1]
 

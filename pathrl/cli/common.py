@@ -16,8 +16,9 @@ class UserError(Exception):
     """Bad user input (argument, config, dataset, checkpoint): reported as one line, exit code 2."""
 
 
-def compose(config_name: str, overrides: Sequence[str]) -> DictConfig:
-    """Compose ``conf/<config_name>.yaml`` with Hydra overrides (``key=value``, ``group=option``)."""
+def compose(config_name: str, overrides: Sequence[str], schema: type | None = None) -> DictConfig:
+    """Compose ``conf/<config_name>.yaml`` with Hydra overrides (``key=value``, ``group=option``); with a `schema`
+    (the app's dataclass) a key it does not declare (added by ``+key=value``) is an error naming the nearest."""
     from hydra import compose as hydra_compose
     from hydra import initialize_config_dir
     from hydra.errors import HydraException
@@ -31,9 +32,24 @@ def compose(config_name: str, overrides: Sequence[str]) -> DictConfig:
             cfg = hydra_compose(config_name=config_name, overrides=list(overrides))
         OmegaConf.resolve(cfg)
     except (HydraException, OmegaConfBaseException) as exc:
-        msg = str(exc).strip().splitlines()[0]
-        raise UserError(f"config error: {msg}") from None
+        raise UserError(f"config error: {hydra_message(exc)}") from None
+    if schema is not None:
+        from pathrl.config.validate import check_keys
+
+        try:
+            check_keys(to_container(cfg), schema)
+        except ValueError as exc:
+            raise UserError(str(exc)) from None
     return cfg
+
+
+def hydra_message(exc: BaseException) -> str:
+    """One line from a Hydra / OmegaConf error: its first line and the line saying why (``Key 'x' is not in
+    struct``), without the hints and the key dumps."""
+    text = str(exc).strip() + ("\n" + str(exc.__cause__).strip() if exc.__cause__ is not None else "")
+    lines = [ln.strip() for ln in text.splitlines() if ln.strip()]
+    keep = [ln for ln in lines if not ln.startswith(("To append", "full_key:", "reference_type", "object_type"))]
+    return " ".join(keep[:2]) if keep else type(exc).__name__
 
 
 def run_cli(main: Callable[[list[str]], Any], argv: Sequence[str] | None = None) -> int:

@@ -68,6 +68,28 @@ def print_info(meta: Mapping[str, Any], path: str, out=None) -> None:
         print(f"generation {json.dumps(meta['generation'])}", file=out)
 
 
+def print_limits(ds, out=None) -> None:
+    """Per split: do the paths stay inside the position limits of the dataset's robot (if pathrl knows it)?"""
+    from pathrl.dataset.io import LIMIT_TOL, limit_excess
+    from pathrl.robot.model import RobotConfigError, load_robot_by_name
+
+    try:
+        robot = load_robot_by_name(str(ds.meta.get("robot")))
+    except (RobotConfigError, ValueError, KeyError):
+        print(f"limits    robot {ds.meta.get('robot')!r} unknown to pathrl: not checked", file=out or sys.stdout)
+        return
+    if list(robot.path_joints) != list(ds.meta.get("path_joints", robot.path_joints)):
+        print(f"limits    path joints differ from robot {robot.name!r}: not checked", file=out or sys.stdout)
+        return
+    for split, sp in ds.splits.items():
+        ex = limit_excess(sp.knots, robot)
+        state = ("inside" if not ex["paths_outside"] else
+                 f"{ex['paths_outside']} of {ex['paths']} paths OUTSIDE, up to {1e3 * ex['max_excess_rad']:.3g} mrad "
+                 f"({ex['joint']}); load with dataset.out_of_limits=clip")
+        print(f"limits    {split:5s} position limits of {robot.name} (tolerance {LIMIT_TOL:g} rad): {state}",
+              file=out or sys.stdout)
+
+
 def cmd_generate(overrides: Sequence[str]) -> None:
     from pathrl.dataset.generate import GenerationError, generate_dataset
     from pathrl.dataset.io import DatasetError
@@ -76,7 +98,9 @@ def cmd_generate(overrides: Sequence[str]) -> None:
     bad = [o for o in overrides if "=" not in o]
     if bad:
         raise UserError(f"generate: expected key=value overrides, got {bad[0]!r}")
-    cfg = compose("dataset_app", overrides)
+    from pathrl.config.schema import DatasetAppCfg
+
+    cfg = compose("dataset_app", overrides, DatasetAppCfg)
     t0 = time.perf_counter()
     try:
         ds = generate_dataset(
@@ -113,6 +137,7 @@ def cmd_import(argv: Sequence[str]) -> None:
         raise UserError(str(exc)) from None
     print(f"imported {args.src_dir} -> {ds.path} in {time.perf_counter() - t0:.1f} s")
     print_info(ds.meta, str(ds.path))
+    print_limits(ds)
 
 
 def cmd_info(argv: Sequence[str]) -> None:
@@ -126,6 +151,7 @@ def cmd_info(argv: Sequence[str]) -> None:
     except DatasetError as exc:
         raise UserError(str(exc)) from None
     print_info(ds.meta, str(ds.path))
+    print_limits(ds)
 
 
 def _main(argv: list[str]) -> None:

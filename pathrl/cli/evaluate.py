@@ -3,7 +3,7 @@
     pathrl-eval run_dir=models/iiwa7_random [dataset=NAME | dataset.path=DIR] [split=test]
                 [episodes=N] [segments=paper|full] [seed=0] [out=DIR]
                 [task=ball_on_plate|standing] [backend=pybullet|analytic] [compile_limits=true|false]
-                [open_loop=true|false] [checkpoint=model_K.pt]
+                [open_loop=true|false] [checkpoint=model_K.pt] [dataset.out_of_limits=refuse|clip]
 
 ``task`` adds a feedback task to a run trained without one (its sensor values stay unobserved); runs with
 a task are simulated with ``backend`` (default PyBullet). ``open_loop=true`` freezes the task's sensor at
@@ -20,9 +20,10 @@ from pathrl.cli.common import UserError, parse_key_values, run_cli
 
 USAGE = ("usage: pathrl-eval run_dir=RUN [dataset=NAME | dataset.path=DIR] [split=test] [episodes=N] "
          "[segments=paper|full] [seed=S] [out=DIR] [record=true|false] [task=ball_on_plate|standing] "
-         "[backend=pybullet|analytic] [compile_limits=true|false] [open_loop=true|false] [checkpoint=model_K.pt]")
+         "[backend=pybullet|analytic] [compile_limits=true|false] [open_loop=true|false] [checkpoint=model_K.pt] "
+         "[dataset.out_of_limits=refuse|clip]")
 KEYS = {"run_dir", "dataset", "dataset.path", "split", "episodes", "segments", "seed", "out", "record", "num_envs",
-        "task", "backend", "compile_limits", "open_loop", "checkpoint"}
+        "task", "backend", "compile_limits", "open_loop", "checkpoint", "dataset.out_of_limits"}
 
 
 def _int(args: dict[str, str], key: str, default: int | None) -> int | None:
@@ -51,6 +52,8 @@ def _main(argv: list[str]) -> None:
         raise UserError(f"segments must be paper or full, got {segments!r}")
     if args.get("task", "ball_on_plate") not in ("ball_on_plate", "standing", "tracking"):
         raise UserError(f"task must be ball_on_plate, standing or tracking, got {args['task']!r}")
+    if args.get("dataset.out_of_limits", "refuse") not in ("refuse", "clip"):
+        raise UserError(f"dataset.out_of_limits must be refuse or clip, got {args['dataset.out_of_limits']!r}")
     if args.get("backend", "pybullet") not in ("pybullet", "analytic"):
         raise UserError(f"backend must be pybullet or analytic, got {args['backend']!r}")
     flags = {"record": _bool(args, "record", True), "compile_limits": _bool(args, "compile_limits", False),
@@ -75,7 +78,7 @@ def _main(argv: list[str]) -> None:
                      num_envs=num_envs,
                      record=flags["record"], task=args.get("task"), backend=args.get("backend", "pybullet"),
                      compile_limits=flags["compile_limits"], open_loop=flags["open_loop"],
-                     checkpoint=args.get("checkpoint"))
+                     checkpoint=args.get("checkpoint"), out_of_limits=args.get("dataset.out_of_limits", "refuse"))
     except (RunError, DatasetError) as exc:
         raise UserError(str(exc)) from None
     _print_table(m)

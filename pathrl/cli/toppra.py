@@ -166,7 +166,9 @@ def print_summary(report: dict[str, Any], out: Path) -> None:
 
 def main_(argv: list[str]) -> dict[str, Any]:
     """Run the baseline; returns the report (also written to ``out``)."""
-    cfg = compose("toppra_app", argv)
+    from pathrl.config.schema import ToppraAppCfg
+
+    cfg = compose("toppra_app", argv, ToppraAppCfg)
     from pathrl.dataset.io import DatasetError, load_dataset, load_pathset
     from pathrl.paths.knots import KnotStrategy
     from pathrl.paths.segments import PROTOCOLS, evaluation_plan
@@ -189,7 +191,7 @@ def main_(argv: list[str]) -> dict[str, Any]:
     data_dir = Path(str(cfg.dataset.path))
     try:
         dataset = load_dataset(data_dir, robot)
-        paths = load_pathset(dataset, str(cfg.split), knots, robot)
+        paths = load_pathset(dataset, str(cfg.split), knots, robot, out_of_limits=str(cfg.dataset.out_of_limits))
     except DatasetError as exc:
         raise UserError(str(exc)) from None
     if cfg.episodes is not None:

@@ -81,6 +81,8 @@ def _main(argv: list[str]) -> None:
         raise UserError(
             "--spawn needs a display (DISPLAY/WAYLAND_DISPLAY unset); use --serve or open the .rrd elsewhere"
         )
+    if args.save is not None and not args.save.parent.is_dir():
+        raise UserError(f"--save {args.save}: directory {args.save.parent} does not exist")
     try:
         jobs = inputs_of(args.path)
         if args.save is not None and len(jobs) > 1:

@@ -51,6 +51,7 @@ class DatasetCfg:
     num_test: int = 200
     seed: int = 0
     params: dict[str, Any] = field(default_factory=dict)  # generator-specific overrides
+    out_of_limits: str = "refuse"  # paths leaving the robot's position limits: refuse | clip (pathrl.dataset.io)
 
 
 @dataclass

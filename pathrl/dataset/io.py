@@ -29,6 +29,7 @@ import hashlib
 import json
 import os
 import shutil
+import sys
 import tempfile
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
@@ -291,6 +292,9 @@ def save_dataset(
 
     dest.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(dir=dest.parent, prefix=f".{dest.name}.tmp-"))
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(tmp, 0o777 & ~umask)  # mkdtemp makes it 0700; the dataset gets the mode of any new directory
     try:
         for split, arr in arrays.items():
             with open(tmp / f"{split}.npz", "wb") as f:
@@ -455,14 +459,49 @@ def apply_strategy(dataset: Dataset, split: str, knots: KnotStrategy, use_cache:
     return out
 
 
+#: Knots may leave the robot's position range by this much (rad) and still count as inside it (rounding).
+LIMIT_TOL = 1e-6
+#: What loading does with paths that leave the robot's position range: refuse the dataset, or clip the knots.
+OUT_OF_LIMITS = ("refuse", "clip")
+
+
+def limit_excess(knots_list: Sequence[np.ndarray], robot: RobotSpec) -> dict[str, Any]:
+    """How far the knots (each (K, M), path joints) leave the robot's position limits: the number of paths that
+    leave them by more than :data:`LIMIT_TOL`, the largest excess (rad) and the joint where it occurs."""
+    lim = robot.pos_limits[robot.path_index]
+    excess = [np.maximum(lim[:, 0] - k, k - lim[:, 1]).max(0) for k in knots_list]  # (M,) per path
+    worst = np.max(excess, axis=0) if excess else np.zeros(robot.path_dof)
+    j = int(np.argmax(worst))
+    return {"paths_outside": int(sum(bool((e > LIMIT_TOL).any()) for e in excess)), "paths": len(knots_list),
+            "max_excess_rad": float(max(worst[j], 0.0)), "joint": robot.path_joints[j]}
+
+
+def check_limits(dataset: Dataset, split: str, robot: RobotSpec, out_of_limits: str) -> bool:
+    """Whether the split's paths must be clipped (``clip``, with a one-line warning); with ``refuse`` a path that
+    leaves the robot's position limits is a :class:`DatasetError`."""
+    if out_of_limits not in OUT_OF_LIMITS:
+        raise DatasetError(f"dataset.out_of_limits must be one of {list(OUT_OF_LIMITS)}, got {out_of_limits!r}")
+    ex = limit_excess(dataset.splits[split].knots, robot)
+    if not ex["paths_outside"]:
+        return False
+    what = (f"{dataset.path}: split {split!r}: {ex['paths_outside']} of {ex['paths']} paths leave robot "
+            f"{robot.name!r}'s position limits (by up to {1e3 * ex['max_excess_rad']:.3g} mrad, joint {ex['joint']})")
+    if out_of_limits == "refuse":
+        raise DatasetError(f"{what}; pass dataset.out_of_limits=clip to clip their knots into the limits")
+    print(f"warning: {what}; their knots are clipped into the limits", file=sys.stderr)
+    return True
+
+
 def load_pathset(
     path: str | os.PathLike | Dataset,
     split: str,
     knots: KnotStrategy,
     robot: RobotSpec | None = None,
     table_step: float = 0.01,
+    out_of_limits: str = "refuse",
 ) -> PathSet:
-    """Load one split, apply the knot strategy (cached) and tabulate it as a PathSet."""
+    """Load one split, apply the knot strategy (cached) and tabulate it as a PathSet. With a `robot`, paths that
+    leave its position limits are refused or clipped (`out_of_limits`, :func:`check_limits`)."""
     from pathrl.paths.pathset import build_pathset
 
     dataset = path if isinstance(path, Dataset) else load_dataset(path, robot)
@@ -472,5 +511,9 @@ def load_pathset(
         raise DatasetError(f"{dataset.path}: no split {split!r} (has {sorted(dataset.splits)})")
     if not len(dataset.splits[split]):
         raise DatasetError(f"{dataset.path / (split + '.npz')}: split {split!r} is empty")
+    clip = robot is not None and check_limits(dataset, split, robot, out_of_limits)
     resampled = apply_strategy(dataset, split, knots)
+    if clip:
+        lim = robot.pos_limits[robot.path_index]
+        resampled = [np.clip(k, lim[:, 0], lim[:, 1]) for k in resampled]
     return build_pathset(resampled, dataset.splits[split].names, table_step=table_step)

@@ -7,6 +7,8 @@ non-negative (as in the paper), so ending an episode early never pays off.
 
 from __future__ import annotations
 
+import difflib
+import inspect
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -153,6 +155,14 @@ def build_reward_terms(terms_cfg: Mapping[str, Mapping[str, Any]]) -> list[Rewar
     for name, spec in terms_cfg.items():
         if name not in REWARD_TERMS:
             raise ValueError(f"unknown reward term {name!r}; known: {sorted(REWARD_TERMS)}")
+        if not isinstance(spec, Mapping) or spec.get("weight") is None:
+            raise ValueError(f"reward.terms.{name}.weight is missing; give every reward term its weight")
         params = {k: v for k, v in dict(spec).items() if k != "weight"}
-        out.append(RewardTerm(name, float(spec.get("weight", 1.0)), REWARD_TERMS[name], params))
+        known = [p for p in inspect.signature(REWARD_TERMS[name]).parameters if p != "q"]
+        for k in params:
+            if k not in known:
+                near = difflib.get_close_matches(k, ["weight", *known], n=1)
+                hint = f"; did you mean {near[0]}?" if near else f"; {name} takes weight, {', '.join(known)}"
+                raise ValueError(f"reward.terms.{name}.{k}: unknown parameter{hint}")
+        out.append(RewardTerm(name, float(spec["weight"]), REWARD_TERMS[name], params))
     return out

@@ -422,7 +422,9 @@ class PathTrackingEnv(_VecEnvBase):
 
     def step(self, actions: Tensor) -> tuple[TensorDict, Tensor, Tensor, dict]:
         cfg = self.cfg
-        actions = actions.to(device=self.device, dtype=torch.float64)
+        # a NaN action entry acts as 0 and +-inf as +-1: every action, finite or not, maps into the valid range
+        actions = torch.nan_to_num(actions.to(device=self.device, dtype=torch.float64), nan=0.0, posinf=1.0,
+                                   neginf=-1.0)
         action_absmax = actions.abs().amax(dim=1)
         a1 = self.accelerations(actions)
         if bool(self.braking.any()):

@@ -12,9 +12,7 @@ import json
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-import torch
-
-from pathrl.train.runner import CHECKPOINT_RE
+from pathrl.storage import checkpoint_iteration, load_checkpoint, run_checkpoints
 
 
 @dataclass(frozen=True)
@@ -45,8 +43,7 @@ def checkpoints(run_dir: Path, every: int) -> list[tuple[int, Path]]:
     """(iteration index, path) of the run's ``model_<k>.pt`` with k a multiple of `every`, plus the last one."""
     if every < 1:
         raise ValueError(f"every: expected a positive number of iterations, got {every}")
-    found = sorted((int(m.group(1)), p) for p in Path(run_dir).glob("model_*.pt")
-                   if (m := CHECKPOINT_RE.match(p.name)))
+    found = [(checkpoint_iteration(p), p) for p in run_checkpoints(run_dir)]
     if not found:
         raise ValueError(f"{run_dir}: no checkpoints (model_<iteration>.pt)")
     return [(k, p) for i, (k, p) in enumerate(found) if k % every == 0 or i == len(found) - 1]
@@ -54,7 +51,7 @@ def checkpoints(run_dir: Path, every: int) -> list[tuple[int, Path]]:
 
 def checkpoint_wall_time(path: Path) -> float | None:
     """The training wall time (s) stored in a checkpoint, None if it predates the record."""
-    infos = torch.load(path, weights_only=True, map_location="cpu").get("infos") or {}
+    infos = load_checkpoint(path).get("infos") or {}
     t = infos.get("wall_time_s")
     return None if t is None else float(t)
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import sys
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -29,12 +30,25 @@ from pathrl.paths.knots import KnotStrategy
 from pathrl.paths.segments import evaluation_plan
 from pathrl.robot.kinematics import ForwardKinematics
 from pathrl.robot.model import RobotSpec, load_robot
+from pathrl.storage import CheckpointError, latest_checkpoint, load_checkpoint
 from pathrl.train.models import MixedPrecisionMLPModel
-from pathrl.train.runner import env_cfg_from, latest_checkpoint, make_feedback, policy_role, task_cfg
+from pathrl.train.runner import env_cfg_from, make_feedback, policy_role, task_cfg
 
 
 class RunError(ValueError):
     """A run / model directory is incomplete or unreadable."""
+
+
+def committed_split(path: str, split: str) -> str:
+    """A run's dataset path, or the committed copy of its test split (``datasets/<robot>/<kind>``, the same
+    paths) when the generated ``data/<robot>/<kind>`` is not on this machine (a fresh checkout)."""
+    p = Path(path)
+    if split == "test" and not p.exists() and p.parts[:1] == ("data",):
+        alt = Path("datasets", *p.parts[1:])
+        if (alt / "dataset.json").is_file():
+            print(f"note: {p} not found; evaluating on the committed test split {alt}", file=sys.stderr)
+            return str(alt)
+    return path
 
 
 def load_run(run_dir: Path) -> tuple[dict[str, Any], Path | None, dict[str, Any]]:
@@ -60,7 +74,12 @@ def load_run(run_dir: Path) -> tuple[dict[str, Any], Path | None, dict[str, Any]
         raise RunError(f"{run_dir}: no checkpoint (model.pt or model_<iteration>.pt)")
     summary = {}
     if (run_dir / "summary.json").is_file():
-        summary = json.loads((run_dir / "summary.json").read_text())
+        try:
+            summary = json.loads((run_dir / "summary.json").read_text())
+        except json.JSONDecodeError as exc:
+            raise RunError(f"{run_dir / 'summary.json'}: invalid JSON ({exc})") from None
+        if not isinstance(summary, dict):
+            raise RunError(f"{run_dir / 'summary.json'}: expected a JSON object, got {type(summary).__name__}")
     return cfg, ckpt, summary
 
 
@@ -81,10 +100,15 @@ def load_policy(cfg: dict[str, Any], env: PathTrackingEnv, ckpt: Path) -> torch.
         raise RunError(f"agent.{role}.class_name: expected one of {sorted(POLICY_MODELS)}")
     groups = {role: list((agent.get("obs_groups") or {}).get(role) or ["policy"])}
     try:
+        state = load_checkpoint(ckpt)
+    except CheckpointError as exc:
+        raise RunError(str(exc)) from None
+    try:
         model = cls(env.get_observations(), groups, role, env.num_actions, **spec)
-        model.load_state_dict(torch.load(ckpt, weights_only=True, map_location="cpu")[f"{role}_state_dict"])
-    except (RuntimeError, KeyError, TypeError, EOFError, OSError) as exc:
-        raise RunError(f"{ckpt}: unreadable checkpoint ({str(exc).splitlines()[0]})") from None
+        model.load_state_dict(state[f"{role}_state_dict"])
+    except (RuntimeError, KeyError, TypeError) as exc:
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise RunError(f"{ckpt}: the checkpoint does not fit the run's policy ({first[:200]})") from None
     return model.to(env.device).eval()
 
 
@@ -104,6 +128,7 @@ def evaluate(
     compile_limits: bool = False,
     open_loop: bool = False,
     checkpoint: str | None = None,
+    out_of_limits: str = "refuse",
 ) -> dict[str, Any]:
     """Evaluate the policy of `run_dir` deterministically; write metrics.json (+ episodes.mcap).
 
@@ -116,6 +141,7 @@ def evaluate(
     steps, too short to earn back the per-process tracing (iiwa7, 1200 episodes: 17 s eager, 35 s compiled).
     ``open_loop``: the task's sensor stays at its first value of each episode (:class:`FrozenSensor`).
     ``checkpoint``: a checkpoint file name in `run_dir` (e.g. ``model_99.pt``) instead of the latest one.
+    ``out_of_limits``: paths of the dataset that leave the robot's position limits are refused or clipped.
     A model-based controller's directory (``controller:`` in its config,
     :func:`pathrl.baselines.controllers.make_controller`) evaluates like a policy.
     """
@@ -135,8 +161,8 @@ def evaluate(
         cfg = {**cfg, "task": {**trained_task, "name": task, "feedback": task, "observe": observe}}
     robot = load_robot(cfg["robot"])
     knots = KnotStrategy.from_cfg(cfg["knots"])
-    ds_path = dataset_path or cfg["dataset"]["path"]
-    paths = load_pathset(ds_path, split, knots, robot=robot)
+    ds_path = dataset_path or committed_split(cfg["dataset"]["path"], split)
+    paths = load_pathset(ds_path, split, knots, robot=robot, out_of_limits=out_of_limits)
     if episodes is None:
         episodes = paths.num_paths if segments == "full" else 1200
     plan = evaluation_plan(paths, episodes, segments, seed)

@@ -202,7 +202,9 @@ WARM_STARTS = {"iiwa7_ball_balancing_reward": "iiwa7_ball_balancing",
                "iiwa7_ball_balancing_finetune": "iiwa7_ball_balancing_distill",
                "iiwa7_ball_balancing_finetune_law": "iiwa7_ball_balancing_distill_law",
                "armar4_target_point_balancing": "armar4_target_point",
-               "armar4_legs_target_point_balancing": "armar4_target_point"}
+               "armar4_legs_target_point_balancing": "armar4_target_point",
+               "iiwa7_random_continue": "iiwa7_random",
+               "armar6_random_continue": "armar6_random"}
 
 
 #: The authors' budget per policy: (million env steps, wall time in hours), from their checkpoints' training

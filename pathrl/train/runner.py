@@ -5,8 +5,7 @@ from __future__ import annotations
 import copy
 import json
 import math
-import os
-import re
+import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -18,17 +17,28 @@ from rsl_rl.runners import DistillationRunner, OnPolicyRunner
 
 from pathrl.dataset.io import load_pathset
 from pathrl.envs.rewards import build_reward_terms
+from pathrl.envs.state import restore, snapshot, snapshot_is_exact, unwrapped
 from pathrl.envs.tracking import PathTrackingEnv, TrackingEnvCfg
 from pathrl.limits import kernels
 from pathrl.paths.knots import KnotStrategy
 from pathrl.robot.model import RobotSpec, load_robot
-
-CHECKPOINT_RE = re.compile(r"^model_(\d+)\.pt$")
-
+from pathrl.storage import (
+    CheckpointError,
+    atomic_write,
+    checkpoint_iteration,
+    clean_leftovers,
+    latest_checkpoint,
+    latest_valid_checkpoint,
+    load_checkpoint,
+    run_checkpoints,
+    save_checkpoint,
+    write_json_atomic,
+)
 
 #: Config keys added after runs were saved, with the value that reproduces what those runs did: a saved config
 #: without the key resumes under a config holding this value (and is evaluated with it, `env_cfg_from`).
-ADDED_KEYS: dict[str, Any] = {"env.free_joint_actions": "linear", "env.posture_omega": 3.0, "task.imu": False,
+ADDED_KEYS: dict[str, Any] = {"dataset.out_of_limits": "refuse",
+                              "env.free_joint_actions": "linear", "env.posture_omega": 3.0, "task.imu": False,
                               "env.tcp_obs": False, "env.tcp_obs_box": [-1.0, 1.0, -1.0, 1.0, -0.7, 1.3],
                               "env.tcp_obs_error": 0.1, "teacher": {},
                               "critic_warmup": {"iterations": 0, "learning_rate": None}}
@@ -119,7 +129,8 @@ def build_env(
     """The tracking env of a resolved config on a dataset split."""
     robot: RobotSpec = load_robot(cfg["robot"])
     knots = KnotStrategy.from_cfg(cfg["knots"])
-    paths = load_pathset(dataset_path or cfg["dataset"]["path"], split, knots, robot=robot)
+    paths = load_pathset(dataset_path or cfg["dataset"]["path"], split, knots, robot=robot,
+                         out_of_limits=str(cfg["dataset"].get("out_of_limits", "refuse")))
     env_cfg = env_cfg_from(cfg, num_envs, seed, knot_gap_norm)
     feedback = make_feedback(cfg, robot, env_cfg.num_envs, env_cfg.seed)
     return PathTrackingEnv(env_cfg, robot, paths, build_reward_terms(cfg["reward"]["terms"]), feedback)
@@ -214,6 +225,8 @@ class PathRLRunner(OnPolicyRunner):
         return self._wall[0] + time.perf_counter() - self._wall[1]
 
     def save(self, path: str, infos: dict | None = None) -> None:
+        """Checkpoint with a content digest (:mod:`pathrl.storage.checkpoints`), written atomically, holding what a
+        resume needs to continue exactly: weights, optimizer, iteration, the torch RNG and the env's state."""
         if self.logger.writer is not None:
             self.logger.writer.flush()  # the checkpoint's iteration is in run.mcap before the checkpoint exists
         if self._summary is not None:
@@ -223,54 +236,62 @@ class PathRLRunner(OnPolicyRunner):
         saved["iter"] = self.current_learning_iteration
         # The wall time in the checkpoint itself: time-to-quality curves read it (pathrl.eval.curve).
         saved["infos"] = {**(infos or {}), **({"wall_time_s": self.wall_time_s()} if self._summary else {})}
-        tmp = f"{path}.tmp"
-        torch.save(saved, tmp)
-        os.replace(tmp, path)
+        saved["rng_torch"] = torch.get_rng_state()
+        saved["env_state"] = snapshot(unwrapped(self.env))
+        saved["env_state_exact"] = snapshot_is_exact(self.env)
+        save_checkpoint(saved, Path(path))
         self.logger.save_model(path, self.current_learning_iteration)
 
     def load(self, path: str, load_cfg: dict | None = None, strict: bool = True,
              map_location: str | None = None) -> dict:
-        loaded = torch.load(path, weights_only=True, map_location=map_location)
+        return self.load_state(load_checkpoint(Path(path), map_location=map_location), load_cfg, strict)
+
+    def load_state(self, loaded: dict, load_cfg: dict | None = None, strict: bool = True) -> dict:
+        """Weights (and optimizer, iteration) of a loaded checkpoint; see :meth:`restore_streams` for the rest."""
         if self.alg.load(loaded, load_cfg, strict):
             self.current_learning_iteration = int(loaded["iter"])
         return loaded.get("infos") or {}
+
+    def restore_streams(self, loaded: dict) -> bool:
+        """The torch RNG and the env's episodes as they were at the checkpoint (checkpoints from before these
+        were stored have neither). Returns whether the continuation is exact."""
+        if "env_state" not in loaded:
+            return False
+        restore(unwrapped(self.env), loaded["env_state"])
+        torch.set_rng_state(loaded["rng_torch"])
+        return bool(loaded.get("env_state_exact", False))
 
 
 class PathRLDistillationRunner(PathRLRunner, DistillationRunner):
     """rsl-rl's DistillationRunner (student-teacher behaviour cloning) with PathRLRunner's checkpoints."""
 
-    def load(self, path: str, load_cfg: dict | None = None, strict: bool = True,
-             map_location: str | None = None) -> dict:
+    def load_state(self, loaded: dict, load_cfg: dict | None = None, strict: bool = True) -> dict:
         # A controller teacher has an empty state dict, which rsl-rl's default (teacher included) takes for a
         # missing one; resume loads the student, its optimizer and the iteration.
-        return super().load(path, load_cfg or {"student": True, "optimizer": True, "iteration": True}, strict,
-                            map_location)
+        return super().load_state(loaded, load_cfg or {"student": True, "optimizer": True, "iteration": True}, strict)
 
 
-def latest_checkpoint(run_dir: Path) -> Path | None:
-    """The checkpoint with the highest iteration in `run_dir`, if any."""
-    best: tuple[int, Path] | None = None
-    for p in Path(run_dir).glob("model_*.pt"):
-        m = CHECKPOINT_RE.match(p.name)
-        if m and (best is None or int(m.group(1)) > best[0]):
-            best = (int(m.group(1)), p)
-    return None if best is None else best[1]
-
-
-def _checkpoint_iteration(ckpt: Path) -> int:
-    """K of ``model_K.pt``: the iteration whose update the checkpoint holds."""
-    return int(CHECKPOINT_RE.match(ckpt.name).group(1))
-
-
-def write_json_atomic(path: Path, obj: Any) -> None:
-    tmp = path.with_suffix(path.suffix + ".tmp")
-    tmp.write_text(json.dumps(obj, indent=2, default=str))
-    os.replace(tmp, path)
+def resume_point(run_dir: Path) -> Path | None:
+    """The checkpoint a resume continues from: the newest one that verifies. Temp files of interrupted writes
+    are removed and damaged newer checkpoints renamed to ``*.damaged`` (kept for inspection, never loaded).
+    None when the run has no checkpoint yet; an error when it has some but none verifies."""
+    clean_leftovers(run_dir)
+    newest, ckpt = latest_checkpoint(run_dir), latest_valid_checkpoint(run_dir)
+    if newest is not None and ckpt is None:
+        raise CheckpointError(f"{run_dir}: no checkpoint verifies; nothing to resume from")
+    for path in run_checkpoints(run_dir):
+        if ckpt is not None and checkpoint_iteration(path) > checkpoint_iteration(ckpt):
+            path.rename(path.with_name(path.name + ".damaged"))
+    return ckpt
 
 
 def check_run_cfg(cfg: dict[str, Any]) -> None:
     """Refuse run-level values that would run but give a wrong result (one-line ValueError naming the key); the
-    env's own values are checked by :class:`pathrl.envs.tracking.TrackingEnvCfg`."""
+    env's own values are checked by :class:`pathrl.envs.tracking.TrackingEnvCfg`; unknown keys are refused."""
+    from pathrl.config.schema import TrainAppCfg
+    from pathrl.config.validate import check_keys
+
+    check_keys(cfg, TrainAppCfg)
     if int(cfg["iterations"]) < 1:
         raise ValueError(f"iterations must be >= 1, got {cfg['iterations']}")
     if int(cfg.get("threads", 1)) < 1:
@@ -292,10 +313,12 @@ def train(cfg: dict[str, Any], run_dir: Path, resume: bool = False) -> dict[str,
     torch.set_num_threads(int(cfg.get("threads", 1)))
     torch.manual_seed(int(cfg["seed"]))
     run_dir.mkdir(parents=True, exist_ok=True)
-    ckpt = latest_checkpoint(run_dir)
-    if ckpt is not None and not resume:
+    if latest_checkpoint(run_dir) is not None and not resume:
         raise FileExistsError(f"{run_dir} already holds checkpoints; pass resume=true or choose another run_dir")
-    if resume and ckpt is not None and (run_dir / "config.yaml").exists():
+    ckpt = resume_point(run_dir) if resume else None
+    if ckpt is None:
+        clean_leftovers(run_dir)
+    if ckpt is not None and (run_dir / "config.yaml").exists():
         saved = yaml.safe_load((run_dir / "config.yaml").read_text())
         saved.setdefault("task", NO_TASK)  # runs from before tasks / warm starts existed
         saved.setdefault("init_from", None)
@@ -306,21 +329,20 @@ def train(cfg: dict[str, Any], run_dir: Path, resume: bool = False) -> dict[str,
     distill = cfg["agent"]["algorithm"]["class_name"] == "Distillation"
     if distill:
         env = _with_teacher(cfg, env)
-    tmp = run_dir / "config.yaml.tmp"
-    tmp.write_text(yaml.safe_dump(cfg, sort_keys=False))
-    os.replace(tmp, run_dir / "config.yaml")
+    atomic_write(run_dir / "config.yaml", yaml.safe_dump(cfg, sort_keys=False))
     prev = json.loads((run_dir / "summary.json").read_text()) if (run_dir / "summary.json").exists() else {}
     # The observation normalizer D must be known to evaluate the policy on any other path set.
     write_json_atomic(run_dir / "summary.json",
                       {**prev, "experiment": cfg["experiment"], "knot_gap_norm": env.knot_gap})
-    train_cfg = rsl_train_cfg(cfg, _checkpoint_iteration(ckpt) if resume and ckpt is not None else None)
+    train_cfg = rsl_train_cfg(cfg, None if ckpt is None else checkpoint_iteration(ckpt))
     runner_cls = PathRLDistillationRunner if distill else PathRLRunner
     runner = runner_cls(env, train_cfg, log_dir=str(run_dir), device=cfg.get("device", "cpu"))
     if distill:
         runner.alg.teacher_loaded = True  # a controller: nothing to load (pathrl.train.distill)
-    done_before = 0
-    if resume and ckpt is not None:
-        runner.load(str(ckpt))
+    done_before, loaded = 0, None
+    if ckpt is not None:
+        loaded = load_checkpoint(ckpt)
+        runner.load_state(loaded)
         runner.current_learning_iteration += 1  # the checkpoint's iteration is finished
         done_before = runner.current_learning_iteration
     elif cfg.get("init_from"):
@@ -337,9 +359,14 @@ def train(cfg: dict[str, Any], run_dir: Path, resume: bool = False) -> dict[str,
         runner.set_std_schedule(total, _init_std(cfg), float(anneal["final"]), float(anneal["start"]))
     remaining = max(total - done_before, 0)
     runner.track_wall_time(run_dir / "summary.json", float(prev.get("wall_time_s", 0.0)))
+    if loaded is not None and not runner.restore_streams(loaded):
+        print(f"note: {ckpt.name} holds no exact env state; the resumed run starts new episodes", file=sys.stderr)
     if remaining:
         with kernels.use_compiled(bool(cfg.get("compile_limits", False))):
             runner.learn(num_learning_iterations=remaining)
+    else:  # killed after its last checkpoint: rewrite (and so close) the log the killed process left open
+        runner.logger.init_logging_writer()
+        runner.logger.stop_logging_writer()
     steps_per_iter = int(train_cfg["num_steps_per_env"]) * env.num_envs
     last_ckpt = latest_checkpoint(run_dir)
     summary = {

@@ -5,16 +5,13 @@ from __future__ import annotations
 import csv
 import io
 import json
-import os
-import shutil
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-import torch
 import yaml
 
-from pathrl.train.runner import latest_checkpoint, write_json_atomic
+from pathrl.storage import atomic_write, latest_valid_checkpoint, load_checkpoint, save_checkpoint, write_json_atomic
 
 
 def read_training_log(run_dir: Path, last_iter: int) -> tuple[int, list[dict[str, Any]]]:
@@ -80,27 +77,21 @@ def ship(run_dir: Path, dest: Path) -> Path:
     """Copy the run's config and last checkpoint (actor + critic weights, or a distilled student; no optimizer)
     to `dest`, with its training summary and (from run.mcap) its learning curve, ``curve.csv``."""
     run_dir, dest = Path(run_dir), Path(dest)
-    ckpt = latest_checkpoint(run_dir)
+    ckpt = latest_valid_checkpoint(run_dir)
     if ckpt is None or not (run_dir / "config.yaml").is_file():
         raise FileNotFoundError(f"{run_dir} has no config.yaml or checkpoint")
-    state = torch.load(ckpt, weights_only=True, map_location="cpu")
+    state = load_checkpoint(ckpt)
     keys = ("student_state_dict",) if "student_state_dict" in state else ("actor_state_dict", "critic_state_dict")
     slim = {k: state[k] for k in (*keys, "iter")}  # a distillation run ships its student (no teacher: a controller)
     slim["infos"] = {"source_checkpoint": ckpt.name}
     dest.mkdir(parents=True, exist_ok=True)
-    tmp = dest / "model.pt.tmp"
-    torch.save(slim, tmp)
-    os.replace(tmp, dest / "model.pt")
-    tmp_cfg = dest / "config.yaml.tmp"
-    shutil.copyfile(run_dir / "config.yaml", tmp_cfg)
-    os.replace(tmp_cfg, dest / "config.yaml")
+    save_checkpoint(slim, dest / "model.pt")
+    atomic_write(dest / "config.yaml", (run_dir / "config.yaml").read_bytes())
     summary = json.loads((run_dir / "summary.json").read_text()) if (run_dir / "summary.json").is_file() else {}
     per_iter, msgs = read_training_log(run_dir, int(state["iter"]))
     summary.update(training_stats(per_iter, msgs, int(state["iter"])))
     summary["shipped_from"] = str(run_dir)
     write_json_atomic(dest / "summary.json", summary)
     if msgs:
-        tmp_curve = dest / "curve.csv.tmp"
-        tmp_curve.write_text(curve_csv(training_curve(per_iter, msgs)))
-        os.replace(tmp_curve, dest / "curve.csv")
+        atomic_write(dest / "curve.csv", curve_csv(training_curve(per_iter, msgs)))
     return dest

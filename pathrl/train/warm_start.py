@@ -19,6 +19,8 @@ import torch
 import yaml
 from torch import Tensor
 
+from pathrl.storage import CheckpointError, latest_valid_checkpoint, load_checkpoint
+
 
 class WarmStartError(ValueError):
     """The warm-start source is missing or does not fit the new run."""
@@ -26,14 +28,12 @@ class WarmStartError(ValueError):
 
 def source_checkpoint(path: str | Path) -> Path:
     """The checkpoint of a shipped model dir (model.pt) or a training run (latest model_<it>.pt)."""
-    from pathrl.train.runner import latest_checkpoint
-
     p = Path(path)
     if p.is_file():
         return p
     if (p / "model.pt").is_file():
         return p / "model.pt"
-    ckpt = latest_checkpoint(p) if p.is_dir() else None
+    ckpt = latest_valid_checkpoint(p, warn=False) if p.is_dir() else None
     if ckpt is None:
         raise WarmStartError(f"init_from={path}: no model.pt or model_<iteration>.pt there")
     return ckpt
@@ -118,11 +118,13 @@ def warm_start(alg, source: str | Path, num_obs: int, init_std: float | None = N
     `init_std` (a converged source has almost no exploration left). Returns the checkpoint used."""
     ckpt = source_checkpoint(source)
     try:
-        loaded = torch.load(ckpt, weights_only=True, map_location="cpu")
+        loaded = load_checkpoint(ckpt)
         actor = dict(loaded["actor_state_dict" if "actor_state_dict" in loaded else "student_state_dict"])
         critic = dict(loaded["critic_state_dict"]) if "critic_state_dict" in loaded else None
-    except (RuntimeError, KeyError, EOFError, OSError) as exc:
-        raise WarmStartError(f"{ckpt}: unreadable checkpoint ({str(exc).splitlines()[0]})") from None
+    except CheckpointError as exc:
+        raise WarmStartError(f"init_from={source}: {exc}") from None
+    except KeyError as exc:
+        raise WarmStartError(f"{ckpt}: no policy weights in the checkpoint (missing {exc})") from None
     if init_std is not None and "distribution.std_param" in actor:
         actor["distribution.std_param"] = torch.full_like(actor["distribution.std_param"], init_std)
     src = source_joints(ckpt) if joints is not None else None

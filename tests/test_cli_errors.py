@@ -1,0 +1,156 @@
+"""Every bad input a user can give a CLI is one line on stderr, exit code 2, no traceback and no partial output.
+
+Each case names what it breaks; the train cases run the real ``pathrl-train`` (Hydra's own error paths are part
+of what is tested), the others call the CLI's ``main`` in-process.
+"""
+
+from __future__ import annotations
+
+import pickle
+import shutil
+from pathlib import Path
+
+import pytest
+from test_storage import _flip_tensor_bytes
+from test_train import ROOT, run, train_cmd
+
+from pathrl.cli import evaluate as eval_cli
+from pathrl.cli import toppra as toppra_cli
+from pathrl.dataset.io import save_dataset
+from pathrl.dataset.synthetic import smooth_paths
+from pathrl.robot.model import load_robot_by_name
+
+#: (override, expected text in the one line)
+TRAIN_CASES = {
+    "negative iterations": ("iterations=-5", "iterations must be >= 1"),
+    "zero envs": ("env.num_envs=0", "env.num_envs must be"),
+    "negative envs": ("env.num_envs=-4", "env.num_envs must be"),
+    "zero dt": ("env.dt=0", "env.dt must be > 0"),
+    "negative dt": ("env.dt=-0.1", "env.dt must be > 0"),
+    "zero substeps": ("env.substeps=0", "env.substeps must be"),
+    "unknown segments": ("env.segments=bogus", "env.segments must be one of"),
+    "zero threads": ("threads=0", "threads must be >= 1"),
+    "cuda without cuda": ("device=cuda", "no CUDA"),
+    "added key typo": ("+env.num_env=5", "did you mean env.num_envs"),
+    "added top-level key": ("+iteration=3", "did you mean iterations"),
+    "removed reward weight": ("~reward.terms.path_length.weight", "weight is missing"),
+    "reward parameter typo": ("+reward.terms.path_length.wieght=2", "did you mean weight"),
+    "override of a missing key": ("reward.terms.path_length.wieght=2", "not in struct"),
+    "not a number": ("iterations=abc", "iterations=abc"),
+    "unknown group option": ("env=nope", "env/nope"),
+}
+
+
+def _one_line(stderr: str) -> str:
+    lines = [ln for ln in stderr.strip().splitlines() if not ln.startswith("pybullet build time")]
+    assert len(lines) == 1 and "Traceback" not in stderr, stderr[-1500:]
+    return lines[0]
+
+
+@pytest.mark.parametrize("case", list(TRAIN_CASES))
+def test_train_bad_config(case, tiny_dataset, tmp_path):
+    override, msg = TRAIN_CASES[case]
+    run_dir = tmp_path / "run"
+    r = run(train_cmd(tiny_dataset, run_dir, 1, override))
+    line = _one_line(r.stderr)
+    assert r.returncode == 2 and line.startswith("error:") and msg in line, (case, line)
+    assert not run_dir.exists() or not any(run_dir.iterdir())  # nothing written
+
+
+def test_train_missing_dataset(tmp_path):
+    r = run(train_cmd(tmp_path / "missing_dataset", tmp_path / "run", 1))
+    assert r.returncode == 2 and "dataset directory not found" in _one_line(r.stderr)
+    assert not (tmp_path / "run" / "config.yaml").exists()  # a failed start leaves nothing to block the next one
+
+
+@pytest.fixture(scope="module")
+def off_limits_dataset(tmp_path_factory):
+    """Knots 1000x outside the joint limits (a unit mix-up in an import), and one 3 mrad outside."""
+    robot = load_robot_by_name("iiwa7")
+    paths = smooth_paths(robot, 3, 0)
+    paths[0] = (paths[0][0], paths[0][1] * 1000.0)
+    dest = tmp_path_factory.mktemp("off") / "d"
+    meta = {"robot": "iiwa7", "kind": "synthetic", "path_joints": list(robot.path_joints), "seed": 0}
+    save_dataset(dest, {"train": paths, "test": paths}, meta)
+    return dest
+
+
+def test_train_on_paths_outside_the_limits(off_limits_dataset, tmp_path):
+    r = run(train_cmd(off_limits_dataset, tmp_path / "run", 1))
+    line = _one_line(r.stderr)
+    assert r.returncode == 2 and "leave robot 'iiwa7'" in line and "out_of_limits=clip" in line
+    assert not (tmp_path / "run" / "config.yaml").exists()
+
+
+def test_toppra_on_paths_outside_the_limits(off_limits_dataset, tmp_path, capsys):
+    out = tmp_path / "t.json"
+    assert toppra_cli.main(["robot=iiwa7", f"dataset.path={off_limits_dataset}", f"out={out}"]) == 2
+    assert "leave robot 'iiwa7'" in _one_line(capsys.readouterr().err) and not out.exists()
+    assert toppra_cli.main(["robot=iiwa7", f"dataset.path={off_limits_dataset}", "+dataset.out_of_limit=clip"]) == 2
+    assert "did you mean dataset.out_of_limits" in _one_line(capsys.readouterr().err)
+
+
+def _model_copy(tmp_path: Path) -> Path:
+    model = tmp_path / "model"
+    shutil.copytree(ROOT / "models" / "iiwa7_random", model)
+    return model
+
+
+def _damage(model: Path, case: str) -> None:
+    if case == "empty checkpoint":
+        (model / "model.pt").write_bytes(b"")
+    elif case == "truncated checkpoint":
+        (model / "model.pt").write_bytes((model / "model.pt").read_bytes()[:5000])
+    elif case == "flipped bytes":
+        _flip_tensor_bytes(model / "model.pt")
+    elif case == "pickled callable":
+        (model / "model.pt").write_bytes(pickle.dumps(print))
+    elif case == "config is a list":
+        (model / "config.yaml").write_text("- a\n- b\n")
+    elif case == "config is not yaml":
+        (model / "config.yaml").write_text("robot: [unclosed\n")
+    elif case == "broken summary":
+        (model / "summary.json").write_text("{not json")
+    elif case == "no checkpoint":
+        (model / "model.pt").unlink()
+
+
+EVAL_CASES = {"empty checkpoint": "unreadable checkpoint", "truncated checkpoint": "unreadable checkpoint",
+              "flipped bytes": "sha256", "pickled callable": "unreadable checkpoint",
+              "config is a list": "expected a mapping", "config is not yaml": "invalid YAML",
+              "broken summary": "invalid JSON", "no checkpoint": "no checkpoint"}
+
+
+@pytest.mark.filterwarnings("ignore:Detected pickle protocol")
+@pytest.mark.parametrize("case", list(EVAL_CASES))
+def test_eval_damaged_model(case, tmp_path, capsys):
+    model = _model_copy(tmp_path)
+    _damage(model, case)
+    out = tmp_path / "out"
+    code = eval_cli.main([f"run_dir={model}", "episodes=2", f"out={out}", "dataset.path=datasets/iiwa7/random"])
+    line = _one_line(capsys.readouterr().err)
+    assert code == 2 and EVAL_CASES[case] in line, (case, line)
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("argv, msg", [
+    (["run_dir=models/iiwa7_random", "num_envs=0"], "num_envs must be >= 1"),
+    (["run_dir=models/iiwa7_random", "episodes=zero"], "integer"),
+    (["run_dir=models/nope"], "not found"),
+    (["run_dir=models/iiwa7_random", "segments=some"], "segments must be"),
+    (["run_dir=models/iiwa7_random", "dataset.out_of_limits=ignore", "episodes=1"], "must be refuse or clip"),
+    (["run_dir=models/iiwa7_random", "bogus=1"], "unknown argument"),
+])
+def test_eval_bad_arguments(argv, msg, tmp_path, capsys):
+    assert eval_cli.main([*argv, f"out={tmp_path / 'out'}"]) == 2
+    assert msg in _one_line(capsys.readouterr().err)
+    assert not (tmp_path / "out").exists()
+
+
+def test_eval_on_a_fresh_checkout_uses_the_committed_test_split(tmp_path, capsys):
+    """models/*/config.yaml name data/<robot>/<kind> (generated, not committed): the committed copy is used."""
+    model = _model_copy(tmp_path)
+    cfg = (model / "config.yaml").read_text().replace("path: data/iiwa7/random", "path: data/iiwa7/not_here")
+    (model / "config.yaml").write_text(cfg)
+    assert eval_cli.main([f"run_dir={model}", "episodes=2", "record=false", f"out={tmp_path / 'o'}"]) == 2
+    assert "data/iiwa7/not_here" in _one_line(capsys.readouterr().err)
