@@ -47,14 +47,33 @@ def _one_line(stderr: str) -> str:
     return lines[0]
 
 
-@pytest.mark.parametrize("case", list(TRAIN_CASES))
-def test_train_bad_config(case, tiny_dataset, tmp_path):
+#: Cases run end to end through the ``pathrl-train`` process (the rest are checked in-process, below): a value,
+#: a Hydra composition error, an added key, and an error found only when the run builds its env.
+SUBPROCESS_CASES = ("negative iterations", "override of a missing key", "added key typo", "reward parameter typo")
+
+
+@pytest.mark.parametrize("case", SUBPROCESS_CASES)
+def test_train_bad_config_end_to_end(case, tiny_dataset, tmp_path):
     override, msg = TRAIN_CASES[case]
     run_dir = tmp_path / "run"
     r = run(train_cmd(tiny_dataset, run_dir, 1, override))
     line = _one_line(r.stderr)
     assert r.returncode == 2 and line.startswith("error:") and msg in line, (case, line)
     assert not run_dir.exists() or not any(run_dir.iterdir())  # nothing written
+
+
+@pytest.mark.parametrize("case", list(TRAIN_CASES))
+def test_train_bad_config(case, tiny_dataset, tmp_path, capsys):
+    """``pathrl-train``'s check before Hydra runs anything (pathrl.cli.train._precheck)."""
+    from pathrl.cli.train import _precheck
+
+    override, msg = TRAIN_CASES[case]
+    run_dir = tmp_path / "run"
+    with pytest.raises(SystemExit) as exc:
+        _precheck([f"dataset.path={tiny_dataset}", f"run_dir={run_dir}", "iterations=1", override])
+    line = _one_line(capsys.readouterr().err)
+    assert exc.value.code == 2 and line.startswith("error:") and msg in line, (case, line)
+    assert not run_dir.exists()
 
 
 def test_train_missing_dataset(tmp_path):

@@ -188,7 +188,8 @@ def test_paths_leaving_the_position_limits_are_refused_or_clipped(tmp_path, caps
     import os
     import stat
 
-    from pathrl.dataset.io import DatasetError, limit_excess, load_pathset
+    from pathrl.dataset.io import DatasetError, load_pathset
+    from pathrl.dataset.limits import limit_excess
     from pathrl.dataset.synthetic import smooth_paths
     from pathrl.paths.knots import KnotStrategy
     from pathrl.robot.model import load_robot_by_name

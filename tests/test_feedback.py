@@ -217,7 +217,7 @@ def test_standing_pool_reads_an_upright_robot():
 
 
 def test_standing_task_refuses_other_robots(iiwa):
-    from pathrl.train.runner import make_feedback
+    from pathrl.envs.factory import make_feedback
 
     cfg = {"task": {"feedback": "standing", "backend": "pybullet"}, "env": {"control_rate": 240.0}}
     with pytest.raises(ValueError, match="ARMAR-4"):

@@ -7,7 +7,7 @@ from rsl_rl.modules import MLP
 from tensordict import TensorDict
 
 from pathrl.eval.curve import CurvePoint, Target, first_reaching
-from pathrl.train.models import MixedPrecisionMLPModel
+from pathrl.policy.models import MixedPrecisionMLPModel
 
 DIST = {"class_name": "GaussianDistribution", "init_std": 0.2, "std_type": "scalar"}
 

@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import json
 import os
 import platform
 import time
@@ -34,6 +33,7 @@ from pathrl.eval.limit_fuzz import fuzz_env, fuzz_report  # noqa: E402
 from pathrl.limits import kernels  # noqa: E402
 from pathrl.paths.pathset import build_pathset  # noqa: E402
 from pathrl.robot.model import RobotSpec, load_robot_by_name  # noqa: E402
+from pathrl.storage import write_json_atomic  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 REWARD = {"path_length": {"weight": 2.0}, "deviation_max": {"weight": 0.9}, "deviation_mean": {"weight": 0.9},
@@ -347,9 +347,7 @@ def main() -> None:
     res["kinematic_tracking_1thread_over_pybullet_ball"] = res[main_key]["env_steps_per_s"] / pyb
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_suffix(".json.tmp")
-    tmp.write_text(json.dumps(res, indent=2))
-    os.replace(tmp, out)
+    write_json_atomic(out, res)
     _print(res, out)
 
 

@@ -28,7 +28,7 @@ import subprocess
 import sys
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import yaml
@@ -47,13 +47,15 @@ from pathrl.repro.tables import (  # noqa: E402
     Evaluation,
     baselines,
     evaluations,
+    warm_chain,
 )
+from pathrl.storage import atomic_write  # noqa: E402
 from pathrl.train.ship import read_curve  # noqa: E402
 
 BIN = Path(sys.executable).parent
 PAPER = yaml.safe_load((ROOT / "tools" / "paper_tables.yaml").read_text())
 #: Evaluations whose episodes are drawn as example path overlays (one per robot).
-OVERLAYS = {"iiwa7_random": "KUKA iiwa 7, random path", "armar6_random": "ARMAR-6, random path",
+OVERLAYS = {"iiwa7_random_continue": "KUKA iiwa 7, random path", "armar6_random_continue": "ARMAR-6, random path",
             "armar4_random": "ARMAR-4 (fixed base), random path"}
 
 
@@ -152,6 +154,8 @@ def build_plan(args: argparse.Namespace, profile: Profile, lay: Layout) -> Plan:
         for e in evals:
             if e.generalization or e.second_test_set or e.model in CONTROLLER_MODELS:  # controllers: not trained
                 continue
+            for source in warm_chain(e.model):  # a warm start's sources first: it starts from their shipped weights
+                trained.setdefault(source, replace(e, model=source))
             trained.setdefault(e.model, e)
         for model, e in trained.items():
             plan.add("prepare", f"train {model}", lambda model=model, e=e: train_and_ship(model, e, profile, lay, logs))
@@ -291,7 +295,7 @@ def collect(lay: Layout) -> dict:
         if p.is_file():
             res["baselines"][b.id] = json.loads(p.read_text())
     res["training"] = {}
-    for model in dict.fromkeys(e.model for e in evaluations()):
+    for model in dict.fromkeys(m for e in evaluations() for m in (*warm_chain(e.model), e.model)):
         p = lay.models / model / "summary.json"
         if p.is_file():
             res["training"][model] = json.loads(p.read_text())
@@ -310,9 +314,7 @@ def collect(lay: Layout) -> dict:
 
 def write_atomic(path: Path, text: str) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(text)
-    os.replace(tmp, path)
+    atomic_write(path, text)
 
 
 def write_outputs(lay: Layout, profile: Profile) -> str:

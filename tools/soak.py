@@ -153,10 +153,10 @@ def run(args: argparse.Namespace) -> dict:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--kills", type=int, default=20)
-    ap.add_argument("--iterations", type=int, default=1000)
+    ap.add_argument("--iterations", type=int, default=2500)
     ap.add_argument("--save-interval", type=int, default=1)
     ap.add_argument("--min-delay", type=float, default=2.0, help="earliest kill after a leg starts (s)")
-    ap.add_argument("--max-delay", type=float, default=12.0, help="latest kill after a leg starts (s)")
+    ap.add_argument("--max-delay", type=float, default=10.0, help="latest kill after a leg starts (s)")
     ap.add_argument("--damage-every", type=int, default=4, help="truncate the newest checkpoint at every n-th kill")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--work", type=Path, default=None, help="empty work directory (default: a temp dir)")

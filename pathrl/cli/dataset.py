@@ -70,7 +70,7 @@ def print_info(meta: Mapping[str, Any], path: str, out=None) -> None:
 
 def print_limits(ds, out=None) -> None:
     """Per split: do the paths stay inside the position limits of the dataset's robot (if pathrl knows it)?"""
-    from pathrl.dataset.io import LIMIT_TOL, limit_excess
+    from pathrl.dataset.limits import LIMIT_TOL, limit_excess
     from pathrl.robot.model import RobotConfigError, load_robot_by_name
 
     try:

@@ -21,10 +21,10 @@ KEYS = {"run_dir", "out", "dataset.path", "observations"}
 def _main(argv: list[str]) -> None:
     from pathrl.dataset.io import DatasetError, load_pathset
     from pathrl.deploy.export import export_policy
+    from pathrl.envs.factory import env_cfg_from, task_cfg
     from pathrl.eval.evaluate import RunError, load_run
     from pathrl.paths.knots import KnotStrategy
     from pathrl.robot.model import load_robot
-    from pathrl.train.runner import env_cfg_from, task_cfg
 
     args = parse_key_values(argv, KEYS, USAGE, required=("run_dir",))
     run_dir = Path(args["run_dir"])

@@ -11,15 +11,13 @@ JSON summary (default ``<dataset.path>/toppra_<split>_<segments>.json``) and pri
 
 from __future__ import annotations
 
-import json
 import math
-import os
-import tempfile
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 from pathrl.cli.common import UserError, compose, run_cli, to_container
+from pathrl.storage import write_json_atomic
 
 #: Default number of episodes of ``segments=paper`` (cycling over the paths).
 PAPER_EPISODES = 1200
@@ -38,15 +36,7 @@ def _mean(xs: Sequence[float]) -> float:
 
 def _atomic_write_json(path: Path, obj: Any) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w") as f:
-            json.dump(obj, f, indent=2, allow_nan=False)
-            f.write("\n")
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    write_json_atomic(path, obj, allow_nan=False)
 
 
 def summarize(results, plan, paths, meta: dict[str, Any]) -> dict[str, Any]:

@@ -55,12 +55,15 @@ def _precheck(argv: list[str]) -> None:
         return
     from pathrl.cli.common import UserError, compose, to_container
     from pathrl.config.schema import TrainAppCfg
-    from pathrl.train.runner import check_run_cfg, env_cfg_from
+    from pathrl.envs.factory import env_cfg_from
+    from pathrl.envs.rewards import build_reward_terms
+    from pathrl.train.runner import check_run_cfg
 
     try:
         cfg = to_container(compose("train", argv, TrainAppCfg))
         check_run_cfg(cfg)
         env_cfg_from(cfg)  # the env's values (TrackingEnvCfg checks them); the dataset is checked by the run
+        build_reward_terms(cfg["reward"]["terms"])
     except (UserError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         raise SystemExit(2) from None

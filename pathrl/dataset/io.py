@@ -38,7 +38,9 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from pathrl.dataset.limits import limit_excess
 from pathrl.paths.spline import PathError, dedupe_knots, knot_arc_lengths
+from pathrl.storage import atomic_write, write_json_atomic
 
 if TYPE_CHECKING:
     from pathrl.paths.knots import KnotStrategy
@@ -204,15 +206,7 @@ def _check_robot(meta: Mapping[str, Any], m: int | None, robot: RobotSpec | None
 
 
 def _atomic_write_json(path: Path, obj: Any) -> None:
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w") as f:
-            json.dump(obj, f, indent=2, sort_keys=False)
-            f.write("\n")
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    write_json_atomic(path, obj)
 
 
 def _jsonable(obj: Any) -> Any:
@@ -412,14 +406,7 @@ def write_cache(dataset: Dataset, split: str, knots: KnotStrategy, knots_list: S
     names = dataset.splits[split].names
     try:
         cache.parent.mkdir(exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=cache.parent, prefix=f".{cache.name}.", suffix=".tmp")
-        try:
-            with os.fdopen(fd, "wb") as f:
-                np.savez(f, **pack(list(zip(names, knots_list, strict=True))))
-            os.replace(tmp, cache)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
+        atomic_write(cache, lambda tmp: np.savez(tmp, **pack(list(zip(names, knots_list, strict=True)))))
     except OSError:  # read-only dataset: no cache
         return False
     return True
@@ -459,21 +446,8 @@ def apply_strategy(dataset: Dataset, split: str, knots: KnotStrategy, use_cache:
     return out
 
 
-#: Knots may leave the robot's position range by this much (rad) and still count as inside it (rounding).
-LIMIT_TOL = 1e-6
 #: What loading does with paths that leave the robot's position range: refuse the dataset, or clip the knots.
 OUT_OF_LIMITS = ("refuse", "clip")
-
-
-def limit_excess(knots_list: Sequence[np.ndarray], robot: RobotSpec) -> dict[str, Any]:
-    """How far the knots (each (K, M), path joints) leave the robot's position limits: the number of paths that
-    leave them by more than :data:`LIMIT_TOL`, the largest excess (rad) and the joint where it occurs."""
-    lim = robot.pos_limits[robot.path_index]
-    excess = [np.maximum(lim[:, 0] - k, k - lim[:, 1]).max(0) for k in knots_list]  # (M,) per path
-    worst = np.max(excess, axis=0) if excess else np.zeros(robot.path_dof)
-    j = int(np.argmax(worst))
-    return {"paths_outside": int(sum(bool((e > LIMIT_TOL).any()) for e in excess)), "paths": len(knots_list),
-            "max_excess_rad": float(max(worst[j], 0.0)), "joint": robot.path_joints[j]}
 
 
 def check_limits(dataset: Dataset, split: str, robot: RobotSpec, out_of_limits: str) -> bool:

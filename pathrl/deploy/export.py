@@ -2,7 +2,7 @@
 
 The exports are rsl-rl's own export modules (``MLPModel.as_jit`` / ``as_onnx``: normaliser, MLP, deterministic
 output) of the actor in float32. A model trained with bfloat16 hidden layers
-(:class:`~pathrl.train.models.MixedPrecisionMLPModel`) is exported with the same weights computing in float32;
+(:class:`~pathrl.policy.models.MixedPrecisionMLPModel`) is exported with the same weights computing in float32;
 ``export.json`` reports how far that is from the bfloat16 policy. The check runs the exports and the float32
 PyTorch actor on observations recorded from the policy itself on test paths.
 """
@@ -10,8 +10,6 @@ PyTorch actor on observations recorded from the policy itself on test paths.
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -24,6 +22,7 @@ from pathrl.envs.tracking import PathTrackingEnv
 from pathrl.eval.evaluate import load_policy
 from pathrl.paths.pathset import PathSet
 from pathrl.paths.segments import evaluation_plan
+from pathrl.storage import atomic_write
 
 #: Largest |export - PyTorch| accepted by the check (float32 actions in [-1, 1]).
 EXPORT_ATOL = 1e-5
@@ -56,17 +55,7 @@ def record_observations(env: PathTrackingEnv, policy: torch.nn.Module, count: in
 
 
 def _atomic(path: Path, write) -> None:
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    os.close(fd)
-    try:
-        write(tmp)
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes the file private; an export is for sharing
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    atomic_write(path, lambda tmp: write(str(tmp)))
 
 
 def export_policy(cfg: dict[str, Any], checkpoint: Path, paths: PathSet, env_cfg, robot, out_dir: Path,

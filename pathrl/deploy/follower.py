@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from pathrl.envs.factory import env_cfg_from, task_cfg
 from pathrl.envs.rewards import build_reward_terms
 from pathrl.envs.tracking import PathTrackingEnv
 from pathrl.eval.evaluate import load_policy, load_run
@@ -31,7 +32,6 @@ from pathrl.paths.knots import KnotStrategy
 from pathrl.paths.pathset import PathSet, build_pathset
 from pathrl.paths.segments import full_segments
 from pathrl.robot.model import RobotSpec, load_robot
-from pathrl.train.runner import env_cfg_from, task_cfg
 
 #: Largest weighted joint distance (rad) between the robot and the start of a path it is asked to follow.
 START_TOLERANCE = 0.05

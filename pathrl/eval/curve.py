@@ -12,7 +12,7 @@ import json
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-from pathrl.storage import checkpoint_iteration, load_checkpoint, run_checkpoints
+from pathrl.storage import atomic_write, checkpoint_iteration, load_checkpoint, run_checkpoints
 
 
 @dataclass(frozen=True)
@@ -120,10 +120,8 @@ def plot_curves(curves: dict[str, list[CurvePoint]], target: Target | None, path
     fig.suptitle(title)
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.stem + ".tmp" + path.suffix)
-    fig.savefig(tmp, dpi=110)
+    atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=110))
     plt.close(fig)
-    tmp.replace(path)
 
 
 def _steps_per_iteration(run_dir: Path) -> int:

@@ -17,6 +17,7 @@ from rsl_rl.models import MLPModel
 
 from pathrl.baselines.controllers import make_controller
 from pathrl.dataset.io import load_pathset
+from pathrl.envs.factory import env_cfg_from, make_feedback, task_cfg
 from pathrl.envs.feedback import FrozenSensor
 from pathrl.envs.rewards import build_reward_terms
 from pathrl.envs.tracking import PathTrackingEnv
@@ -28,11 +29,10 @@ from pathrl.limits.feasible import JointLimits
 from pathrl.logging.mcap_io import McapJsonWriter
 from pathrl.paths.knots import KnotStrategy
 from pathrl.paths.segments import evaluation_plan
+from pathrl.policy import MixedPrecisionMLPModel, policy_role
 from pathrl.robot.kinematics import ForwardKinematics
 from pathrl.robot.model import RobotSpec, load_robot
-from pathrl.storage import CheckpointError, latest_checkpoint, load_checkpoint
-from pathrl.train.models import MixedPrecisionMLPModel
-from pathrl.train.runner import env_cfg_from, make_feedback, policy_role, task_cfg
+from pathrl.storage import CheckpointError, latest_checkpoint, load_checkpoint, write_json_atomic
 
 
 class RunError(ValueError):
@@ -244,9 +244,7 @@ def _finish(records, rollout_s, env, robot, paths, ds_path, split, segments, see
     out.mkdir(parents=True, exist_ok=True)
     if record:
         write_episodes_mcap(out / "episodes.mcap", robot, paths, records, per_episode, fk)
-    tmp = out / "metrics.json.tmp"
-    tmp.write_text(json.dumps(metrics, indent=2))
-    os.replace(tmp, out / "metrics.json")
+    write_json_atomic(out / "metrics.json", metrics)
     return metrics
 
 

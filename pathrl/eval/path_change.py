@@ -232,10 +232,9 @@ def summarize(episodes: list[SwitchEpisode], replans: list[dict], level: float, 
 def main(argv: list[str] | None = None) -> None:
     """``python -m pathrl.eval.path_change MODEL_DIR TEST_DATASET OUT.json [--episodes N] [--seed S]``."""
     import argparse
-    import json
-    import os
 
     from pathrl.dataset.io import load_dataset
+    from pathrl.storage import write_json_atomic
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("model")
@@ -256,10 +255,7 @@ def main(argv: list[str] | None = None) -> None:
         replans = toppra_replan(follower, knots, args.episodes, args.seed, offset_rad=offset, ramp_rad=ramp)
         res["variants"][name] = {"offset_rad": offset, "ramp_rad": ramp, **summarize(episodes, replans, level, dt),
                                  "settle_s": [_finite(e.settle_s(level, dt)) for e in episodes]}
-    tmp = f"{args.out}.tmp"
-    with open(tmp, "w") as fh:
-        json.dump(res, fh, indent=2)
-    os.replace(tmp, args.out)
+    write_json_atomic(args.out, res)
 
 
 if __name__ == "__main__":

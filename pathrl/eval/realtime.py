@@ -123,11 +123,10 @@ def _timed_episodes(env: PathTrackingEnv, mlp: torch.nn.Module, plan: Segments, 
 def main(argv: list[str] | None = None) -> int:
     """``python -m pathrl.eval.realtime ROBOT DATASET_DIR OUT.json [--episodes N]``: both variants -> JSON."""
     import argparse
-    import json
-    import os
     from pathlib import Path
 
     from pathrl.robot.model import load_robot_by_name
+    from pathrl.storage import write_json_atomic
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("robot")
@@ -141,9 +140,7 @@ def main(argv: list[str] | None = None) -> int:
     res = {key: realtime_ratios(robot, args.dataset, args.episodes, simulate, compile_limits=not args.eager)
            for key, simulate in (("policy_and_limits", False), ("with_simulation", True))}
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = args.out.with_suffix(".json.tmp")
-    tmp.write_text(json.dumps(res, indent=2))
-    os.replace(tmp, args.out)
+    write_json_atomic(args.out, res)
     for k, v in res.items():
         print(f"{args.robot} {k}: max {v['max_compute_to_duration_pct']:.2f} % of the trajectory duration, "
               f"{v['decision_ms_mean']:.2f} ms per decision (max {v['decision_ms_max']:.2f})")

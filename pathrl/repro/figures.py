@@ -2,21 +2,19 @@
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from pathrl.repro.tables import ROWS, TABLE_II
+from pathrl.storage import atomic_write
 
 
 def _save(fig, path: Path) -> None:
     """Write a figure atomically (temp file + rename)."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.stem}.tmp{path.suffix}")
-    fig.savefig(tmp, dpi=130, bbox_inches="tight")
-    os.replace(tmp, path)
+    atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=130, bbox_inches="tight"))
 
 
 def pareto_table_ii(results: dict[str, Any], paper: dict[str, Any], path: Path) -> bool:

@@ -98,6 +98,11 @@ def _ball(model: str, open_loop: bool = False) -> Evaluation:
     return _e(model, "iiwa7", "ball_balancing", "distance_5", "full", task="ball_on_plate", open_loop=open_loop)
 
 
+def greedy_model(ev: Evaluation) -> str:
+    """The greedy follower's model dir for a row's robot and paths (one per Table I row, whatever its policy)."""
+    return f"greedy_{ev.robot}_{ev.dataset}"
+
+
 IIWA_RANDOM = _e("iiwa7_random", "iiwa7", "random")
 ARMAR4_RANDOM = _e("armar4_random", "armar4", "random")
 
@@ -122,10 +127,13 @@ REALTIME = (("iiwa7", "iiwa7", "iiwa7/random"), ("armar4_with_legs", "armar4_leg
 PATH_CHANGE = (("iiwa7/random", "iiwa7_random", "iiwa7/random"), ("armar6/random", "armar6_random", "armar6/random"))
 
 TABLE_I_ROWS: tuple[Row, ...] = (
-    Row(TABLE_I, "iiwa7/random", IIWA_RANDOM),
+    # trained on from iiwa7_random with the path length weighted 6 (conf/experiment/iiwa7_random_continue.yaml);
+    # Tables II-IV keep iiwa7_random, whose rows share one budget
+    Row(TABLE_I, "iiwa7/random", _e("iiwa7_random_continue", "iiwa7", "random")),
     Row(TABLE_I, "iiwa7/target_point", _e("iiwa7_target_point", "iiwa7", "target_point")),
     Row(TABLE_I, "iiwa7/ball_balancing", _e("iiwa7_ball_balancing", "iiwa7", "ball_balancing", "distance_5", "full")),
-    Row(TABLE_I, "armar6/random", _e("armar6_random", "armar6", "random")),
+    # trained on from armar6_random at a lower path-length weight (conf/experiment/armar6_random_continue.yaml)
+    Row(TABLE_I, "armar6/random", _e("armar6_random_continue", "armar6", "random")),
     Row(TABLE_I, "armar4_fixed/random", ARMAR4_RANDOM),
     Row(TABLE_I, "armar4_fixed/target_point", _e("armar4_target_point", "armar4", "target_point")),
 )
@@ -138,7 +146,7 @@ OURS_ONLY = frozenset({TABLE_GREEDY})
 
 ROWS: tuple[Row, ...] = (
     *TABLE_I_ROWS,
-    *(Row(TABLE_GREEDY, r.key, replace(r.evaluation, model=f"greedy_{r.evaluation.model}")) for r in TABLE_I_ROWS),
+    *(Row(TABLE_GREEDY, r.key, replace(r.evaluation, model=greedy_model(r.evaluation))) for r in TABLE_I_ROWS),
     *(Row(TABLE_I_TEST2, r.key, replace(r.evaluation, second_test_set=True)) for r in TABLE_I_ROWS
       if r.key not in NO_SECOND_TEST_SET),
     Row(TABLE_II, "length_lt_deviation", _e("iiwa7_random_length_lt_deviation", "iiwa7", "random")),
@@ -191,7 +199,7 @@ NOT_IN_PAPER = frozenset({(TABLE_VII, "balancing_reward/open_loop"), (TABLE_VII,
 
 #: Model directories that hold a model-based controller (``controller:`` in config.yaml): evaluated, not trained.
 CONTROLLER_MODELS = frozenset({"iiwa7_ball_tray_controller", "iiwa7_ball_tray_law",
-                               *(f"greedy_{r.evaluation.model}" for r in TABLE_I_ROWS)})
+                               *(greedy_model(r.evaluation) for r in TABLE_I_ROWS)})
 
 
 #: Rows trained from another row's policy (conf/experiment/<model>.yaml: init_from: models/<source>).
@@ -205,6 +213,17 @@ WARM_STARTS = {"iiwa7_ball_balancing_reward": "iiwa7_ball_balancing",
                "armar4_legs_target_point_balancing": "armar4_target_point",
                "iiwa7_random_continue": "iiwa7_random",
                "armar6_random_continue": "armar6_random"}
+
+
+def warm_chain(model: str) -> list[str]:
+    """The models `model` is warm-started from, the first trained first (empty for a policy trained from scratch)."""
+    chain: list[str] = []
+    while model in WARM_STARTS:
+        model = WARM_STARTS[model]
+        if model in chain:
+            raise ValueError(f"WARM_STARTS: a cycle through {model}")
+        chain.insert(0, model)
+    return chain
 
 
 #: The authors' budget per policy: (million env steps, wall time in hours), from their checkpoints' training

@@ -23,7 +23,7 @@ from pathrl.storage.atomic import atomic_write
 CHECKPOINT_RE = re.compile(r"^model_(\d+)\.pt$")
 DIGEST_KEY = "sha256"
 #: Leftovers of writes a kill interrupted: checkpoints, logs, configs, summaries (``pathrl.storage.atomic``).
-LEFTOVER_GLOBS = ("*.tmp", ".*.tmp")
+LEFTOVER_GLOBS = ("*.tmp", ".*.tmp", ".*.tmp.*")
 
 
 class CheckpointError(ValueError):
@@ -60,7 +60,7 @@ def save_checkpoint(state: dict[str, Any], path: Path) -> str:
     """Write `state` plus its digest to `path` atomically (temp file, fsync, rename); returns the digest."""
     body = {k: v for k, v in state.items() if k != DIGEST_KEY}
     digest = content_digest(body)
-    atomic_write(Path(path), lambda f: torch.save({**body, DIGEST_KEY: digest}, f))
+    atomic_write(Path(path), lambda tmp: torch.save({**body, DIGEST_KEY: digest}, tmp))
     return digest
 
 
@@ -118,10 +118,7 @@ def latest_valid_checkpoint(run_dir: Path, warn: bool = True) -> Path | None:
 
 def clean_leftovers(run_dir: Path) -> list[Path]:
     """Remove the temp files of writes a kill interrupted in `run_dir`; returns what was removed."""
-    removed = []
-    for pattern in LEFTOVER_GLOBS:
-        for p in Path(run_dir).glob(pattern):
-            if p.is_file():
-                p.unlink()
-                removed.append(p)
-    return removed
+    found = {p for pattern in LEFTOVER_GLOBS for p in Path(run_dir).glob(pattern) if p.is_file()}
+    for p in found:
+        p.unlink()
+    return sorted(found)
