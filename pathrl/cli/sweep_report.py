@@ -50,14 +50,14 @@ def print_summary(sweep_dir: Path) -> None:
 
 def sweep_exit_code(fallback: int) -> int:
     """After a multirun: the number of failed jobs (at most 100), printing the summary if Hydra stopped before its
-    end callback; `fallback` (the process's own exit code) when no multirun ran."""
+    end callback; `fallback` (the process's own exit code) when no job failed or no multirun ran."""
     if LAST_SWEEP is None:
         return fallback
     recs = read_jobs(LAST_SWEEP)
     if not _SUMMARIZED:
         print_summary(LAST_SWEEP)
     failed = sum(r["status"] != "ok" for r in recs)
-    return min(failed, 100) if failed or recs else fallback
+    return min(failed, 100) if failed else fallback
 
 
 class SweepReport(Callback):

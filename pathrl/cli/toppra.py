@@ -34,11 +34,6 @@ def _mean(xs: Sequence[float]) -> float:
     return sum(xs) / len(xs) if xs else math.nan
 
 
-def _atomic_write_json(path: Path, obj: Any) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    write_json_atomic(path, obj, allow_nan=False)
-
-
 def summarize(results, plan, paths, meta: dict[str, Any]) -> dict[str, Any]:
     """The JSON report of a solved plan (see module doc)."""
     import numpy as np
@@ -226,7 +221,8 @@ def main_(argv: list[str]) -> dict[str, Any]:
         },
     }
     report = summarize(results, plan, paths, meta)
-    _atomic_write_json(out, report)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    write_json_atomic(out, report, allow_nan=False)
     print_summary(report, out)
     return report
 

@@ -40,7 +40,7 @@ import numpy as np
 
 from pathrl.dataset.limits import limit_excess
 from pathrl.paths.spline import PathError, dedupe_knots, knot_arc_lengths
-from pathrl.storage import atomic_write, write_json_atomic
+from pathrl.storage import atomic_write
 
 if TYPE_CHECKING:
     from pathrl.paths.knots import KnotStrategy
@@ -203,10 +203,6 @@ def _check_robot(meta: Mapping[str, Any], m: int | None, robot: RobotSpec | None
 
 # ----------------------------------------------------------------------------------------------------
 # save / load
-
-
-def _atomic_write_json(path: Path, obj: Any) -> None:
-    write_json_atomic(path, obj)
 
 
 def _jsonable(obj: Any) -> Any:
