@@ -16,6 +16,9 @@ $(STAMP): pyproject.toml
 	# torch first, pinned: this resolves to the local CPU build (any other spec pulls a CUDA build).
 	$(PY) -m pip install -q torch==2.13.0
 	$(PY) -m pip install -q -e '.[dev]'
+	# torchrl's TD3 loss for the industrial waypoint policy (pathrl/industrial/rl.py). torchrl 0.14.1 pins
+	# tensordict<0.15 but runs with rsl-rl's 0.15.3 (tests/test_industrial_rl.py): installed without its pins.
+	$(PY) -m pip install -q --no-deps torchrl==0.14.1 hoptorch==0.1.4
 	touch $(STAMP)
 
 test: setup

@@ -171,10 +171,32 @@ def build_plan(args: argparse.Namespace, profile: Profile, lay: Layout) -> Plan:
         for key, robot, split in REALTIME:
             plan.add("timing", f"real time {key}", lambda key=key, robot=robot, split=split: realtime(
                 key, robot, split, profile, lay, args.reuse, logs))
+        plan.add("evaluate", "motion-profile tables (pathrl-industrial)", lambda: industrial(lay, args.reuse, logs))
         for key, model, split in PATH_CHANGE:  # times re-plans: on the otherwise idle machine, like Table IX
             plan.add("timing", f"path changes {key}", lambda key=key, model=model, split=split: path_change(
                 key, model, split, profile, lay, args.reuse, logs))
     return plan
+
+
+#: The motion-profile tables of the third paper (`pathrl-industrial`, docs/industrial.md): (subcommand, output key,
+#: file in the output dir, overrides). The shipped TD3 policies are evaluated; MPGD and bisection run in full.
+INDUSTRIAL = (("table2", "out_table2", "industrial_table2.md", ("policy=models/industrial_td3",)),
+              ("table2", "out_table2", "industrial_table2_noise.md",
+               ("policy=models/industrial_td3", "controller.noise_mm=0.05", "controller.runs=5")),
+              ("speed", "out_speed", "industrial_speed.md", ()),
+              ("speed", "out_speed", "industrial_speed_rl.md", ("policy=models/industrial_td3",)),
+              ("table4", "out_table4", "industrial_table4.md", ()),
+              ("sweep", "out_sweep", "industrial_baseline_sweep.md", ("sweep_speeds=[100,250,400,700,1100]",)))
+
+
+def industrial(lay: Layout, reuse: bool, logs: Path) -> None:
+    """The motion-profile tables (`INDUSTRIAL`), each written by pathrl-industrial into the output dir."""
+    for command, key, name, overrides in INDUSTRIAL:
+        out = lay.out / name
+        if reuse and out.is_file():
+            continue
+        shown = out.relative_to(ROOT) if out.is_relative_to(ROOT) else out  # as the table's "Measured with" line
+        sh([str(BIN / "pathrl-industrial"), command, *overrides, f"{key}={shown}"], logs / f"industrial_{out.stem}.log")
 
 
 def tiny_dataset(robot: str, name: str, test_dir: str, profile: Profile, lay: Layout, reuse: bool,

@@ -41,20 +41,23 @@ def train_cmd(dataset: Path, run_dir: Path, iterations: int, save_interval: int)
 def logged_iterations(run_dir: Path) -> list[int]:
     """Iterations in run.mcap, read leniently (a killed writer leaves no footer)."""
     from pathrl.logging.mcap_io import iter_messages
+    from pathrl.logging.schema import TRAIN_SCALARS
 
     path = run_dir / "run.mcap"
     if not path.exists():
         return []
-    return [m["iteration"] for t, _, m in iter_messages(path) if t == "/train/scalars"]
+    return [m["iteration"] for t, _, m in iter_messages(path) if t == TRAIN_SCALARS]
 
 
 def plain_mcap_iterations(path: Path) -> list[int]:
     """Iterations in run.mcap read by the stock reader (needs a complete file: summary and footer)."""
     from mcap.reader import make_reader
 
+    from pathrl.logging.schema import TRAIN_SCALARS
+
     with open(path, "rb") as f:
         return [json.loads(msg.data)["iteration"] for _, ch, msg in make_reader(f).iter_messages()
-                if ch.topic == "/train/scalars"]
+                if ch.topic == TRAIN_SCALARS]
 
 
 def weights(ckpt: Path) -> dict[str, torch.Tensor]:

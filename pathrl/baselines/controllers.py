@@ -3,14 +3,40 @@ config.yaml (``models/iiwa7_ball_tray_controller``), or ``teacher: {...}`` of a 
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+from typing import Any
+
+from torch import Tensor
+
+from pathrl.baselines.balance import BalanceCfg, BalanceController
 from pathrl.baselines.ball_feedback import TrayController, TrayControllerCfg
 from pathrl.baselines.greedy_follower import GreedyCfg, GreedyFollower
 from pathrl.envs.tracking import PathTrackingEnv
 
-CONTROLLERS = {"tray": (TrayController, TrayControllerCfg), "greedy": (GreedyFollower, GreedyCfg)}
+
+@dataclass(frozen=True)
+class ReferenceReplayCfg:
+    """No settings: the reference trajectory's own accelerations."""
 
 
-def make_controller(spec: dict, env: PathTrackingEnv) -> TrayController | GreedyFollower:
+class ReferenceReplay:
+    """TrueAdapt's reference without adaptation as a controller: the actions (N, D) that replay each env's reference
+    trajectory (:meth:`pathrl.envs.trueadapt.TrueAdaptEnv.reference_actions`); the base of a residual policy there."""
+
+    def __init__(self, env: Any, cfg: ReferenceReplayCfg | None = None):
+        if not hasattr(env, "reference_actions"):
+            raise ValueError("controller reference: needs a trajectory-adaptation env (task=trueadapt_*)")
+        self.env = env
+
+    def __call__(self, obs: Any) -> Tensor:
+        return self.env.reference_actions()
+
+
+CONTROLLERS = {"tray": (TrayController, TrayControllerCfg), "greedy": (GreedyFollower, GreedyCfg),
+               "reference": (ReferenceReplay, ReferenceReplayCfg), "balance": (BalanceController, BalanceCfg)}
+
+
+def make_controller(spec: dict, env: PathTrackingEnv) -> TrayController | GreedyFollower | ReferenceReplay:
     """The controller named by `spec` (``{"name": "tray", **gains}``) for `env`; ValueError on a bad spec."""
     if not isinstance(spec, dict) or spec.get("name") not in CONTROLLERS:
         name = spec.get("name") if isinstance(spec, dict) else spec
@@ -21,7 +47,9 @@ def make_controller(spec: dict, env: PathTrackingEnv) -> TrayController | Greedy
     unknown = sorted(set(keys) - known)
     if unknown:
         raise ValueError(f"controller {spec['name']}: unknown keys {unknown}; known: {sorted(known)}")
-    bad = [k for k, v in keys.items() if isinstance(v, bool) or not isinstance(v, int | float)]
+    text = {k for k, f in cfg_cls.__dataclass_fields__.items() if isinstance(f.default, str)}  # e.g. a model dir
+    bad = [k for k, v in keys.items()
+           if (not isinstance(v, str) if k in text else isinstance(v, bool) or not isinstance(v, int | float))]
     if bad:
-        raise ValueError(f"controller {spec['name']}: {bad} must be numbers")
+        raise ValueError(f"controller {spec['name']}: {bad} must be numbers (text: {sorted(text)})")
     return cls(env, cfg_cls(**keys))

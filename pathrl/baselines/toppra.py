@@ -43,8 +43,18 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from scipy.interpolate import BSpline
 
+from pathrl.baselines.toppra_path import (
+    CHECK_RTOL,
+    SegmentPath,
+    as_toppra_path,
+    const_accel_eval,
+    limit_counts,
+    merge_gridpoints,
+    sample_times,
+    segment_gridpoints,
+    toppra_module,
+)
 from pathrl.paths.spline import arc_length_table, chord_params, dedupe_knots, fit_spline
 
 if TYPE_CHECKING:
@@ -54,10 +64,6 @@ if TYPE_CHECKING:
 
 #: Default spacing (rad of arc length) of the uniform part of the gridpoints.
 GRID_STEP = 0.02
-#: Minimum number of gridpoints of a segment (short segments).
-MIN_GRIDPOINTS = 100
-#: Relative tolerance of the control-rate limit check (float noise only).
-CHECK_RTOL = 1e-9
 #: Relative safety margin on the velocity / acceleration limits given to toppra.
 MARGIN = 1e-3
 #: Every re-solve inserts the overshooting samples as gridpoints; after this many solves it also
@@ -141,141 +147,106 @@ class ToppraResult:
         }
 
 
-def _toppra():
-    import toppra as ta
-
-    ta.setup_logging("WARNING")
-    return ta
+def _warm_imports() -> None:
+    import pathrl.limits.check  # noqa: F401
 
 
-class SegmentPath:
-    """q(r) = spline(u0 + r (u1 - u0)), r in [0, 1], with derivatives in r (a toppra geometric path)."""
+@dataclass
+class _Refined:
+    """Outcome of :func:`_solve_refined`: the limit scales, gridpoints and solves used; if feasible, the samples
+    at times t (T,): path parameter r (T,), joint velocities qd and accelerations qdd (T, M), and the duration."""
 
-    def __init__(self, spline: BSpline, u0: float, u1: float) -> None:
-        self._d = [spline]
-        for nu in (1, 2):
-            self._d.append(spline.derivative(nu) if spline.k >= nu else None)
-        self._m = spline.c.shape[1]
-        self.u0, self.du = float(u0), float(u1 - u0)
-
-    def __call__(self, r, order: int = 0) -> np.ndarray:
-        r = np.asarray(r, dtype=np.float64)
-        d = self._d[order]
-        if d is None:
-            return np.zeros((*r.shape, self._m))
-        return d(self.u0 + self.du * r) * self.du**order
-
-    @property
-    def dof(self) -> int:
-        return self._m
-
-    @property
-    def path_interval(self) -> np.ndarray:
-        return np.array([0.0, 1.0])
-
-    @property
-    def waypoints(self):
-        return None
+    feasible: bool
+    vel_scale: float
+    acc_scale: float
+    grid: np.ndarray
+    iterations: int
+    t: np.ndarray | None = None
+    r: np.ndarray | None = None
+    qd: np.ndarray | None = None
+    qdd: np.ndarray | None = None
+    duration: float = math.nan
 
 
-def as_toppra_path(seg: SegmentPath):
-    ta = _toppra()
+def _solve_refined(
+    seg: SegmentPath,
+    grid: np.ndarray,
+    vel: np.ndarray,
+    acc: np.ndarray,
+    start_rate: float,
+    control_rate: float,
+    max_iterations: int,
+    refine_iterations: int,
+    margin: float,
+) -> _Refined:
+    """Solve with toppra and re-solve while a control-rate sample exceeds a limit (steps 2-3 of the module doc)."""
+    import toppra.algorithm as algo
+    import toppra.constraint as constraint
+    from toppra.algorithm.algorithm import ParameterizationReturnCode
 
-    class _Path(ta.interpolator.AbstractGeometricPath):
-        def __call__(self, r, order=0):
-            return seg(r, order)
-
-        @property
-        def dof(self):
-            return seg.dof
-
-        @property
-        def path_interval(self):
-            return seg.path_interval
-
-        @property
-        def waypoints(self):
-            return None
-
-    return _Path()
-
-
-def segment_gridpoints(
-    u_table: np.ndarray,
-    s_table: np.ndarray,
-    u_knots: np.ndarray,
-    start_s: float,
-    end_s: float,
-    u0: float,
-    u1: float,
-    grid_step: float,
-) -> np.ndarray:
-    """Gridpoints in r: a uniform arc-length grid plus every spline knot strictly inside the segment."""
-    n = max(int(math.ceil((end_s - start_s) / grid_step)) + 1, MIN_GRIDPOINTS)
-    u_grid = np.interp(np.linspace(start_s, end_s, n), s_table, u_table)
-    inner = u_knots[(u_knots > u0) & (u_knots < u1)]
-    r = (np.r_[u_grid, inner] - u0) / (u1 - u0)
-    r = np.unique(np.clip(r, 0.0, 1.0))
-    # drop points closer than 1e-9 (float duplicates) and pin the ends
-    keep = np.r_[True, np.diff(r) > 1e-9]
-    r = r[keep]
-    r[0], r[-1] = 0.0, 1.0
-    if len(r) >= 2 and r[-1] - r[-2] <= 1e-9:
-        r = np.r_[r[:-2], 1.0]
-    return r
-
-
-def const_accel_eval(
-    ss: np.ndarray, sd: np.ndarray, t: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
-    """Path parameter, its rate and acceleration at times t under constant sdd between gridpoints.
-
-    Same law as toppra's ``ParametrizeConstAccel`` (vectorized). Returns (s, sd, sdd, duration).
-    """
-    x = sd**2
-    ds = np.diff(ss)
-    u = 0.5 * np.diff(x) / ds
-    dt = 2.0 * ds / np.maximum(sd[:-1] + sd[1:], 1e-300)
-    ts = np.r_[0.0, np.cumsum(dt)]
-    i = np.clip(np.searchsorted(ts, t, side="right") - 1, 0, len(ss) - 2)
-    tau = t - ts[i]
-    s = np.clip(ss[i] + sd[i] * tau + 0.5 * u[i] * tau**2, ss[0], ss[-1])
-    v = np.maximum(sd[i] + u[i] * tau, 0.0)
-    return s, v, u[i], float(ts[-1])
+    path = as_toppra_path(seg)
+    vel_scale = acc_scale = 1.0 - margin
+    tol = 1.0 + CHECK_RTOL
+    for it in range(1, max_iterations + 1):
+        cons = [
+            constraint.JointVelocityConstraint(vel * vel_scale),
+            constraint.JointAccelerationConstraint(acc * acc_scale),
+        ]
+        inst = algo.TOPPRA(cons, path, gridpoints=grid, solver_wrapper="seidel")
+        sd_start = start_rate / max(float(np.linalg.norm(seg(0.0, 1))), 1e-12)  # arc length / s -> r / s
+        inst.compute_parameterization(sd_start, 0.0)
+        data = inst.problem_data
+        if data.return_code != ParameterizationReturnCode.Ok or data.sd_vec is None:
+            return _Refined(False, vel_scale, acc_scale, grid, it)
+        ss, sdv = np.asarray(data.gridpoints), np.asarray(data.sd_vec)
+        sdv = np.maximum(sdv, 0.0)
+        sdv[0], sdv[-1] = sd_start, 0.0
+        _, _, _, duration = const_accel_eval(ss, sdv, np.zeros(1))
+        t = sample_times(duration, control_rate)
+        r, rd, rdd, _ = const_accel_eval(ss, sdv, t)
+        d1 = seg(r, 1)
+        qd = d1 * rd[:, None]
+        qdd = seg(r, 2) * (rd**2)[:, None] + d1 * rdd[:, None]
+        qd[-1] = 0.0  # at rest at t = duration (float residue of the last interval)
+        over_v = np.any(np.abs(qd) > vel * tol, axis=1)
+        over_a = np.any(np.abs(qdd) > acc * tol, axis=1)
+        if not (over_v.any() or over_a.any()) or it == max_iterations:
+            break
+        # constrain the trajectory where it overshot: the violating samples become gridpoints
+        grid = merge_gridpoints(grid, r[over_v | over_a])
+        if it > refine_iterations:  # last resort: also scale the limits down by the observed overshoot
+            vr, ar = float(np.max(np.abs(qd) / vel)), float(np.max(np.abs(qdd) / acc))
+            if vr > 1.0:
+                vel_scale *= (1.0 - RESCALE_MARGIN) / vr
+            if ar > 1.0:
+                acc_scale *= (1.0 - RESCALE_MARGIN) / ar
+    return _Refined(True, vel_scale, acc_scale, grid, it, t, r, qd, qdd, duration)
 
 
-def _sample_times(duration: float, control_rate: float) -> np.ndarray:
-    n = int(math.ceil(duration * control_rate - 1e-9))
-    return np.minimum(np.arange(n + 1) / control_rate, duration)
-
-
-def limit_counts(
+def _sample_checks(
+    seg: SegmentPath,
+    sol: _Refined,
     q: np.ndarray,
-    qd: np.ndarray,
-    qdd: np.ndarray,
     pos: np.ndarray | None,
     vel: np.ndarray,
     acc: np.ndarray,
     jerk: np.ndarray | None,
     control_rate: float,
-) -> dict[str, int]:
-    """Counts of control-rate samples x joints beyond the limits (pathrl.limits.check)."""
-    import torch
-
-    from pathrl.limits.check import limit_violations
-    from pathrl.limits.feasible import JointLimits
-
-    m = q.shape[1]
-    pos_lim = pos if pos is not None else np.tile([-np.inf, np.inf], (m, 1))
-    jerk_lim = jerk if jerk is not None else np.full(m, np.inf)
-    limits = JointLimits.from_arrays(pos_lim, vel, acc, jerk_lim)
-    t = lambda a: torch.as_tensor(a, dtype=torch.float64)  # noqa: E731
-    out = limit_violations(t(q), t(qd), t(qdd), limits, 1.0 / control_rate, CHECK_RTOL)
-    return {k: int(v.sum()) for k, v in out.items() if k != "total"}
-
-
-def _warm_imports() -> None:
-    import pathrl.limits.check  # noqa: F401
+) -> dict[str, Any]:
+    """Path deviation, limit violations and limit ratios of the control-rate samples q (T, M) of `sol`."""
+    t, r, qd, qdd = sol.t, sol.r, sol.qd, sol.qdd
+    dev = float(np.linalg.norm(q - seg(r), axis=1).max())
+    viol = limit_counts(q, qd, qdd, pos, vel, acc, jerk, control_rate)
+    jerk_abs = np.abs(np.diff(qdd, axis=0)) * control_rate if len(t) > 1 else np.zeros((1, q.shape[1]))
+    return {
+        "max_joint_dev_rad": dev,
+        "violations": {k: viol.get(k, 0) for k in VIOLATION_KEYS},
+        "max_vel_ratio": float(np.max(np.abs(qd) / vel)),
+        "max_acc_ratio": float(np.max(np.abs(qdd) / acc)),
+        "max_jerk": float(jerk_abs.max()),
+        "max_jerk_ratio": float((jerk_abs / jerk).max()) if jerk is not None else math.nan,
+        "jerk_violations": int(viol.get("jerk", 0)),
+    }
 
 
 def solve_segment(
@@ -301,11 +272,7 @@ def solve_segment(
     start_rate: path velocity at the start (rad of arc length per s; 0: from rest). toppra reports the
     segment infeasible if the limits cannot be kept from that velocity.
     """
-    _toppra()
-    import toppra.algorithm as algo
-    import toppra.constraint as constraint
-    from toppra.algorithm.algorithm import ParameterizationReturnCode
-
+    toppra_module()
     _warm_imports()  # one-time import cost (torch, limits check) stays out of solve_time_s
     t_begin = time.perf_counter()
     knots = dedupe_knots(knots)
@@ -336,70 +303,21 @@ def solve_segment(
         return result("empty", duration_s=0.0, max_joint_dev_rad=0.0)
     u0, u1 = np.interp([start_s, end_s], s_table, u_table)
     seg = SegmentPath(spline, u0, u1)
-    path = as_toppra_path(seg)
     grid = segment_gridpoints(u_table, s_table, chord_params(knots), start_s, end_s, u0, u1, grid_step)
-
-    vel_scale = acc_scale = 1.0 - margin
-    tol = 1.0 + CHECK_RTOL
-    for it in range(1, max_iterations + 1):
-        cons = [
-            constraint.JointVelocityConstraint(vel * vel_scale),
-            constraint.JointAccelerationConstraint(acc * acc_scale),
-        ]
-        inst = algo.TOPPRA(cons, path, gridpoints=grid, solver_wrapper="seidel")
-        sd_start = start_rate / max(float(np.linalg.norm(seg(0.0, 1))), 1e-12)  # arc length / s -> r / s
-        inst.compute_parameterization(sd_start, 0.0)
-        data = inst.problem_data
-        if data.return_code != ParameterizationReturnCode.Ok or data.sd_vec is None:
-            return result(
-                "infeasible",
-                vel_scale=vel_scale,
-                acc_scale=acc_scale,
-                num_gridpoints=len(grid),
-                iterations=it,
-            )
-        ss, sdv = np.asarray(data.gridpoints), np.asarray(data.sd_vec)
-        sdv = np.maximum(sdv, 0.0)
-        sdv[0], sdv[-1] = sd_start, 0.0
-        _, _, _, duration = const_accel_eval(ss, sdv, np.zeros(1))
-        t = _sample_times(duration, control_rate)
-        r, rd, rdd, _ = const_accel_eval(ss, sdv, t)
-        d1 = seg(r, 1)
-        qd = d1 * rd[:, None]
-        qdd = seg(r, 2) * (rd**2)[:, None] + d1 * rdd[:, None]
-        qd[-1] = 0.0  # at rest at t = duration (float residue of the last interval)
-        over_v = np.any(np.abs(qd) > vel * tol, axis=1)
-        over_a = np.any(np.abs(qdd) > acc * tol, axis=1)
-        if not (over_v.any() or over_a.any()) or it == max_iterations:
-            break
-        # constrain the trajectory where it overshot: the violating samples become gridpoints
-        grid = _merge_gridpoints(grid, r[over_v | over_a])
-        if it > refine_iterations:  # last resort: also scale the limits down by the observed overshoot
-            vr, ar = float(np.max(np.abs(qd) / vel)), float(np.max(np.abs(qdd) / acc))
-            if vr > 1.0:
-                vel_scale *= (1.0 - RESCALE_MARGIN) / vr
-            if ar > 1.0:
-                acc_scale *= (1.0 - RESCALE_MARGIN) / ar
-
-    q = seg(r)
-    dev = float(np.linalg.norm(q - seg(r), axis=1).max())
-    viol = limit_counts(q, qd, qdd, pos, vel, acc, jerk, control_rate)
-    jerk_abs = np.abs(np.diff(qdd, axis=0)) * control_rate if len(t) > 1 else np.zeros((1, m))
+    sol = _solve_refined(seg, grid, vel, acc, start_rate, control_rate, max_iterations, refine_iterations, margin)
+    vel_scale, acc_scale, grid, it = sol.vel_scale, sol.acc_scale, sol.grid, sol.iterations
+    if not sol.feasible:
+        return result("infeasible", vel_scale=vel_scale, acc_scale=acc_scale, num_gridpoints=len(grid), iterations=it)
+    q = seg(sol.r)
     res = result(
         "ok",
-        duration_s=duration,
-        max_joint_dev_rad=dev,
+        duration_s=sol.duration,
         q=q if keep_trajectory else empty,
-        qd=qd if keep_trajectory else empty,
-        qdd=qdd if keep_trajectory else empty,
+        qd=sol.qd if keep_trajectory else empty,
+        qdd=sol.qdd if keep_trajectory else empty,
         vel_scale=vel_scale,
         acc_scale=acc_scale,
-        violations={k: viol.get(k, 0) for k in VIOLATION_KEYS},
-        max_vel_ratio=float(np.max(np.abs(qd) / vel)),
-        max_acc_ratio=float(np.max(np.abs(qdd) / acc)),
-        max_jerk=float(jerk_abs.max()),
-        max_jerk_ratio=float((jerk_abs / jerk).max()) if jerk is not None else math.nan,
-        jerk_violations=int(viol.get("jerk", 0)),
+        **_sample_checks(seg, sol, q, pos, vel, acc, jerk, control_rate),
         num_gridpoints=len(grid),
         iterations=it,
     )
@@ -407,19 +325,6 @@ def solve_segment(
         res.status = "violations"
     res.solve_time_s = time.perf_counter() - t_begin
     return res
-
-
-def _merge_gridpoints(grid: np.ndarray, new: np.ndarray, min_gap: float = 1e-7) -> np.ndarray:
-    """Insert `new` parameters into the sorted `grid`, skipping those closer than min_gap to a point."""
-    new = np.unique(new[(new > min_gap) & (new < 1.0 - min_gap)])
-    if not len(new):
-        return grid
-    j = np.clip(np.searchsorted(grid, new), 1, len(grid) - 1)
-    gap = np.minimum(new - grid[j - 1], grid[j] - new)
-    new = new[gap > min_gap]
-    if len(new) > 1:
-        new = new[np.r_[True, np.diff(new) > min_gap]]
-    return np.sort(np.r_[grid, new])
 
 
 # ----------------------------------------------------------------------------------------------- plan

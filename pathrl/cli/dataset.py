@@ -60,6 +60,12 @@ def print_info(meta: Mapping[str, Any], path: str, out=None) -> None:
     for split, by_strategy in meta.get("stats", {}).items():
         for strategy, st in by_strategy.items():
             print(f"  {split:5s} {strategy:22s} {_fmt_stats(st)}", file=out)
+    if meta.get("kind") == "trueadapt" and meta.get("trajectories"):  # time-parameterised trajectories
+        from pathrl.dataset.trueadapt import format_trajectory_stats
+
+        print(f"samples   every {meta.get('sample_dt')} s (the knots of a path are its samples in time)", file=out)
+        for line in format_trajectory_stats(meta["trajectories"]):
+            print(line, file=out)
     gen = meta.get("generator") or {}
     if gen:
         shown = {k: v for k, v in gen.items() if k != "robot_config"}

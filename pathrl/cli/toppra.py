@@ -150,7 +150,10 @@ def print_summary(report: dict[str, Any], out: Path) -> None:
 
 
 def main_(argv: list[str]) -> dict[str, Any]:
-    """Run the baseline; returns the report (also written to ``out``)."""
+    """Run the baseline; returns the report (also written to ``out``); ``-h`` / ``--help`` prints the usage."""
+    if any(a in ("-h", "--help") for a in argv):
+        print(__doc__.strip())
+        return {}
     from pathrl.config.schema import ToppraAppCfg
 
     cfg = compose("toppra_app", argv, ToppraAppCfg)

@@ -55,15 +55,20 @@ def _precheck(argv: list[str]) -> None:
         return
     from pathrl.cli.common import UserError, compose, to_container
     from pathrl.config.schema import TrainAppCfg
-    from pathrl.envs.factory import env_cfg_from
+    from pathrl.envs.factory import env_cfg_from, is_trueadapt
     from pathrl.envs.rewards import build_reward_terms
     from pathrl.train.runner import check_run_cfg
 
     try:
         cfg = to_container(compose("train", argv, TrainAppCfg))
         check_run_cfg(cfg)
-        env_cfg_from(cfg)  # the env's values (TrackingEnvCfg checks them); the dataset is checked by the run
-        build_reward_terms(cfg["reward"]["terms"])
+        if is_trueadapt(cfg):  # its own env and reward (pathrl.envs.trueadapt)
+            from pathrl.envs.trueadapt import check_adapt_cfg
+
+            check_adapt_cfg(cfg)
+        else:
+            env_cfg_from(cfg)  # the env's values (TrackingEnvCfg checks them); the dataset is checked by the run
+            build_reward_terms(cfg["reward"]["terms"])
     except (UserError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         raise SystemExit(2) from None

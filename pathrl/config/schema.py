@@ -131,6 +131,7 @@ class TaskCfg:
     observe: bool = True  # sensor values in the state
     fail_terminates: bool = True  # the task's failure (ball off the plate) ends the episode
     imu: bool = False  # ball_on_plate: the plate's inertial sensor reading joins the state (feedback.PlateIMU)
+    adapt: dict[str, Any] = field(default_factory=dict)  # TrueAdapt task settings (pathrl.envs.trueadapt); {}: none
 
 
 @dataclass
@@ -174,3 +175,5 @@ class TrainAppCfg:
     init_from: str | None = None  # warm start: actor/critic weights of this run or model dir (new inputs start at 0)
     critic_warmup: CriticWarmupCfg = field(default_factory=CriticWarmupCfg)  # a new critic learns alone first
     teacher: dict[str, Any] = field(default_factory=dict)  # agent=distillation: the labelling controller (name: tray)
+    # PPO on a residual over a controller: {scale, controller: {name: tray, ...}} (pathrl.policy.residual)
+    residual: dict[str, Any] = field(default_factory=dict)

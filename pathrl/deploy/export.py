@@ -66,6 +66,9 @@ def export_policy(cfg: dict[str, Any], checkpoint: Path, paths: PathSet, env_cfg
     """
     import onnxruntime
 
+    if cfg.get("residual"):
+        raise ValueError("a residual policy acts through its controller, which has no TorchScript/ONNX form; "
+                         "export exports whole policy networks")
     env = PathTrackingEnv(env_cfg, robot, paths, build_reward_terms(cfg["reward"]["terms"]))
     policy = load_policy(cfg, env, checkpoint)
     obs = record_observations(env, policy, observations)

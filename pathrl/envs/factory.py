@@ -16,7 +16,7 @@ from pathrl.robot.model import RobotSpec, load_robot
 ADDED_KEYS: dict[str, Any] = {"dataset.out_of_limits": "refuse",
                               "env.free_joint_actions": "linear", "env.posture_omega": 3.0, "task.imu": False,
                               "env.tcp_obs": False, "env.tcp_obs_box": [-1.0, 1.0, -1.0, 1.0, -0.7, 1.3],
-                              "env.tcp_obs_error": 0.1, "teacher": {},
+                              "env.tcp_obs_error": 0.1, "teacher": {}, "residual": {}, "task.adapt": {},
                               "critic_warmup": {"iterations": 0, "learning_rate": None}}
 
 
@@ -64,6 +64,11 @@ def task_cfg(cfg: dict[str, Any]) -> dict[str, Any]:
     return {**NO_TASK, **(cfg.get("task") or {})}
 
 
+def is_trueadapt(cfg: dict[str, Any]) -> bool:
+    """Whether a config's task is a TrueAdapt trajectory adaptation (``task.adapt`` set)."""
+    return bool(task_cfg(cfg).get("adapt"))
+
+
 def make_feedback(cfg: dict[str, Any], robot: RobotSpec, num_envs: int, seed: int, backend: str | None = None):
     """The feedback source of a config's task (None for plain tracking); `backend` overrides task.backend."""
     t = task_cfg(cfg)
@@ -103,6 +108,10 @@ def build_env(
     seed: int | None = None,
 ) -> PathTrackingEnv:
     """The tracking env of a resolved config on a dataset split."""
+    if is_trueadapt(cfg):  # a TrueAdapt task (task.adapt): its own env (pathrl.envs.trueadapt)
+        from pathrl.envs.trueadapt import build_trueadapt_env
+
+        return build_trueadapt_env(cfg, split, num_envs, dataset_path, seed)
     robot: RobotSpec = load_robot(cfg["robot"])
     knots = KnotStrategy.from_cfg(cfg["knots"])
     paths = load_pathset(dataset_path or cfg["dataset"]["path"], split, knots, robot=robot,

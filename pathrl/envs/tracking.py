@@ -48,7 +48,7 @@ Fixed step order (per env, batched; every tensor is (N, ...)):
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import asdict
 
 import torch
 from tensordict import TensorDict
@@ -57,6 +57,7 @@ from torch import Tensor
 from pathrl import native
 from pathrl.envs.feedback import Feedback
 from pathrl.envs.rewards import TASK_VALUES, RewardTerm, StepQuantities
+from pathrl.envs.tracking_cfg import FREE_JOINT_ACTIONS, TERMINATION_REASONS, TrackingEnvCfg  # noqa: F401 (moved)
 from pathrl.limits.braking import braking_within, is_stopped
 from pathrl.limits.feasible import (
     JointLimits,
@@ -75,66 +76,6 @@ try:  # rsl-rl is a training dependency; the env works without it (evaluation, t
     from rsl_rl.env import VecEnv as _VecEnvBase
 except ImportError:  # pragma: no cover
     _VecEnvBase = object
-
-
-FREE_JOINT_ACTIONS = ("centred", "posture", "linear")
-
-
-@dataclass(frozen=True)
-class TrackingEnvCfg:
-    """Environment settings (``conf/env/*.yaml``)."""
-
-    num_envs: int = 4096
-    device: str = "cpu"
-    seed: int = 0
-    dt: float = 0.1  # decision step (s)
-    control_rate: float = 240.0  # setpoints per second (24 per step), used by backends and evaluation
-    substeps: int = 8  # intermediate positions per step for progress and deviation
-    episode_budget_s: float = 16.0  # time budget for a whole path (s)
-    scale_budget: bool = True  # scale the budget by the fraction of the path in the segment
-    segments: str = "paper"  # training segments: paper | full
-    start_range: tuple[float, float] = (0.0, 0.8)
-    min_fraction: float = 0.2
-    max_deviation: float | None = None  # terminate if a step's max deviation exceeds this (rad)
-    stop_tolerance: float = 0.01  # |v| and |a| below this count as stopped
-    stop_bonus: bool = True
-    knot_gap_norm: float | None = None  # D (rad); default: the path set's largest knot gap
-    n_state: int = 9  # knots in the observation
-    knot_obs: str = "relative"  # knots as seen from the robot (relative) or in joint space (absolute, paper)
-    end_obs: bool = False  # add the vector to the end knot and the arc length left, both at knot-gap scale
-    end_tolerance: float | None = None  # also reached: within this (weighted, rad) of the end knot, < D arc left
-    feedback_obs: bool = True  # with a feedback source: its sensor values are part of the state
-    tcp_obs: bool = False  # + per TCP the reference position at s and reference - commanded (the authors' ball state)
-    tcp_obs_box: tuple[float, ...] = (-1.0, 1.0, -1.0, 1.0, -0.7, 1.3)  # x, y, z ranges (m) -> [-1, 1]
-    tcp_obs_error: float = 0.1  # reference - commanded TCP (m) that maps to 1
-    fail_terminates: bool = True  # with a feedback source: its failure (ball off the plate) ends the episode
-    free_joint_actions: str = "centred"  # joints outside the path: centred (0 holds) | posture | linear (paper)
-    posture_omega: float = 3.0  # free_joint_actions=posture: natural frequency of the pull to the start posture (rad/s)
-    autoreset: bool = True
-
-    def __post_init__(self) -> None:
-        """Refuse values that would run but give a wrong result (one-line ValueError naming the key)."""
-        for key in ("num_envs", "substeps", "n_state"):
-            if int(getattr(self, key)) < 1:
-                raise ValueError(f"env.{key} must be >= 1, got {getattr(self, key)}")
-        for key in ("dt", "control_rate", "episode_budget_s", "posture_omega", "stop_tolerance"):
-            if not float(getattr(self, key)) > 0.0:  # also refuses NaN
-                raise ValueError(f"env.{key} must be > 0, got {getattr(self, key)}")
-        for key, allowed in (("segments", ("paper", "full")), ("knot_obs", ("relative", "absolute")),
-                             ("free_joint_actions", FREE_JOINT_ACTIONS)):
-            if getattr(self, key) not in allowed:
-                raise ValueError(f"env.{key} must be one of {', '.join(allowed)}; got {getattr(self, key)!r}")
-        lo, hi = (float(x) for x in self.start_range)
-        if not 0.0 <= lo <= hi < 1.0 or not 0.0 < self.min_fraction <= 1.0:
-            raise ValueError(f"env.start_range must be 0 <= lo <= hi < 1 and env.min_fraction in (0, 1]; got "
-                             f"{list(self.start_range)}, {self.min_fraction}")
-        for key in ("max_deviation", "end_tolerance", "knot_gap_norm"):
-            v = getattr(self, key)
-            if v is not None and not float(v) > 0.0:
-                raise ValueError(f"env.{key} must be > 0 or null, got {v}")
-
-
-TERMINATION_REASONS = ("robot_stopped", "deviation", "task_failed", "time_out")
 
 
 @kernel(static=True)
@@ -475,22 +416,7 @@ class PathTrackingEnv(_VecEnvBase):
         self.ep_dev_max = torch.maximum(self.ep_dev_max, dev_max)
 
         # 6. end of path -> braking; stop / deviation -> terminate; budget -> time out
-        reached = self.s >= self.end_s - 1e-9
-        if cfg.end_tolerance is not None:  # corner cutting leaves arc length uncovered at the end knot
-            to_end = ((self.end_q - self.pos[:, self.path_index]) * self.dev_weights).norm(dim=1)
-            reached = reached | ((to_end <= cfg.end_tolerance) & (self.end_s - self.s < self.knot_gap))
-        newly = reached & (self.finish_step < 0)
-        self.finish_step = torch.where(newly, self.episode_length_buf, self.finish_step)
-        stopped = self.braking & is_stopped(self.vel, self.acc, cfg.stop_tolerance)
-        self.braking = self.braking | reached
-        terminated = stopped
-        dev_term = torch.zeros_like(stopped)
-        if cfg.max_deviation is not None:
-            dev_term = dev_max > cfg.max_deviation
-            terminated = terminated | dev_term
-        task_term = failed & ~terminated if cfg.fail_terminates else torch.zeros_like(failed)
-        terminated = terminated | task_term
-        time_outs = (self.episode_length_buf >= self.budget) & ~terminated
+        reached, stopped, dev_term, task_term, terminated, time_outs = self._end_of_step(dev_max, failed)
 
         # 7. finishing early is worth the rest of the budget
         if cfg.stop_bonus:
@@ -508,6 +434,29 @@ class PathTrackingEnv(_VecEnvBase):
             self._reset_envs(dones.nonzero().squeeze(1), refresh=False)
         self._update_window()
         return self.get_observations(), reward.to(torch.float32), dones, extras
+
+    def _end_of_step(self, dev_max: Tensor, failed: Tensor) -> tuple[Tensor, Tensor, Tensor, Tensor, Tensor, Tensor]:
+        """Step 6 of the step order, after the state update: end of path -> braking; stop / deviation / task
+        failure -> terminate; budget -> time out. Returns the (N,) masks reached, stopped, dev_term, task_term,
+        terminated, time_outs."""
+        cfg = self.cfg
+        reached = self.s >= self.end_s - 1e-9
+        if cfg.end_tolerance is not None:  # corner cutting leaves arc length uncovered at the end knot
+            to_end = ((self.end_q - self.pos[:, self.path_index]) * self.dev_weights).norm(dim=1)
+            reached = reached | ((to_end <= cfg.end_tolerance) & (self.end_s - self.s < self.knot_gap))
+        newly = reached & (self.finish_step < 0)
+        self.finish_step = torch.where(newly, self.episode_length_buf, self.finish_step)
+        stopped = self.braking & is_stopped(self.vel, self.acc, cfg.stop_tolerance)
+        self.braking = self.braking | reached
+        terminated = stopped
+        dev_term = torch.zeros_like(stopped)
+        if cfg.max_deviation is not None:
+            dev_term = dev_max > cfg.max_deviation
+            terminated = terminated | dev_term
+        task_term = failed & ~terminated if cfg.fail_terminates else torch.zeros_like(failed)
+        terminated = terminated | task_term
+        time_outs = (self.episode_length_buf >= self.budget) & ~terminated
+        return reached, stopped, dev_term, task_term, terminated, time_outs
 
     def _episode_log(self, dones: Tensor, stopped: Tensor, dev_term: Tensor, task_term: Tensor,
                      time_outs: Tensor) -> dict:

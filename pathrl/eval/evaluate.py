@@ -14,6 +14,7 @@ import numpy as np
 import torch
 import yaml
 from rsl_rl.models import MLPModel
+from tensordict import TensorDict
 
 from pathrl.baselines.controllers import make_controller
 from pathrl.dataset.io import load_pathset
@@ -27,9 +28,22 @@ from pathrl.limits import kernels
 from pathrl.limits.check import limit_violations
 from pathrl.limits.feasible import JointLimits
 from pathrl.logging.mcap_io import McapJsonWriter
+from pathrl.logging.schema import (
+    EVAL_EPISODE_METRICS,
+    EVAL_JOINT_STATE,
+    EVAL_REFERENCE,
+    EVAL_ROBOT,
+    EVAL_TASK,
+    EVAL_TCP,
+    JOINT_STATE_SCHEMA,
+    JOINT_STATE_SCHEMA_NAME,
+    ROBOT_SCHEMA,
+    ROBOT_SCHEMA_NAME,
+)
 from pathrl.paths.knots import KnotStrategy
 from pathrl.paths.segments import evaluation_plan
 from pathrl.policy import MixedPrecisionMLPModel, policy_role
+from pathrl.policy.residual import BASE_GROUP, ResidualPolicy, check_residual_cfg
 from pathrl.robot.kinematics import ForwardKinematics
 from pathrl.robot.model import RobotSpec, load_robot
 from pathrl.storage import CheckpointError, latest_checkpoint, load_checkpoint, write_json_atomic
@@ -90,8 +104,22 @@ POLICY_MODELS = {"MLPModel": MLPModel, "rsl_rl.models:MLPModel": MLPModel,
 
 
 def load_policy(cfg: dict[str, Any], env: PathTrackingEnv, ckpt: Path) -> torch.nn.Module:
-    """The deterministic policy of checkpoint `ckpt` (weights only): the PPO actor, or a distillation run's
-    student."""
+    """The deterministic policy of checkpoint `ckpt` (weights only): the PPO actor, a distillation run's student,
+    or a residual run's actor on top of its controller (:class:`~pathrl.policy.residual.ResidualPolicy`)."""
+    if not cfg.get("residual"):
+        return _load_network(cfg, env, ckpt, env.get_observations())
+    try:
+        scale, spec = check_residual_cfg(cfg["residual"])
+        controller = make_controller(spec, env)
+    except ValueError as exc:
+        raise RunError(f"{ckpt.parent}: {exc}") from None
+    obs = env.get_observations()
+    obs[BASE_GROUP] = torch.zeros(env.num_envs, env.num_actions)
+    return ResidualPolicy(controller, _load_network(cfg, env, ckpt, obs), scale).eval()
+
+
+def _load_network(cfg: dict[str, Any], env: PathTrackingEnv, ckpt: Path, obs: TensorDict) -> torch.nn.Module:
+    """The policy network of checkpoint `ckpt`, built for observations like `obs`."""
     agent = cfg.get("agent") or {}
     role = policy_role(agent)
     spec = dict(agent.get(role) or {})
@@ -104,7 +132,7 @@ def load_policy(cfg: dict[str, Any], env: PathTrackingEnv, ckpt: Path) -> torch.
     except CheckpointError as exc:
         raise RunError(str(exc)) from None
     try:
-        model = cls(env.get_observations(), groups, role, env.num_actions, **spec)
+        model = cls(obs, groups, role, env.num_actions, **spec)
         model.load_state_dict(state[f"{role}_state_dict"])
     except (RuntimeError, KeyError, TypeError) as exc:
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
@@ -304,15 +332,6 @@ def _aggregate(per: list[dict[str, Any]], robot: RobotSpec, dataset: str, split:
     return out
 
 
-ROBOT_SCHEMA = {"type": "object", "properties": {"robot": {"type": "string"}, "joint_names": {"type": "array"},
-                "position_limits": {"type": "array"}, "velocity_limits": {"type": "array"},
-                "acceleration_limits": {"type": "array"}, "jerk_limits": {"type": "array"},
-                "urdf": {"type": "string"}}}
-JOINT_STATE_SCHEMA = {"type": "object", "properties": {"episode": {"type": "integer"}, "t": {"type": "number"},
-                      "position": {"type": "array"}, "velocity": {"type": "array"},
-                      "acceleration": {"type": "array"}}}
-
-
 def write_episodes_mcap(path: Path, robot: RobotSpec, paths, records: list[EpisodeRecord],
                         per_episode: list[dict[str, Any]], fk: ForwardKinematics) -> None:
     """Evaluation episodes as MCAP (JSON): robot once, per episode reference + states + TCP + metrics.
@@ -321,9 +340,9 @@ def write_episodes_mcap(path: Path, robot: RobotSpec, paths, records: list[Episo
     leaves no file)."""
     tmp = path.with_suffix(".mcap.tmp")
     w = McapJsonWriter(tmp)
-    w.channel("/eval/robot", "pathrl.RobotDescription", ROBOT_SCHEMA)
-    w.channel("/eval/joint_state", "pathrl.JointState", JOINT_STATE_SCHEMA)
-    w.write("/eval/robot", {
+    w.channel(EVAL_ROBOT, ROBOT_SCHEMA_NAME, ROBOT_SCHEMA)
+    w.channel(EVAL_JOINT_STATE, JOINT_STATE_SCHEMA_NAME, JOINT_STATE_SCHEMA)
+    w.write(EVAL_ROBOT, {
         "robot": robot.name, "joint_names": list(robot.joints), "path_joints": list(robot.path_joints),
         "position_limits": robot.pos_limits.tolist(),
         "velocity_limits": [[-v, v] for v in robot.vel_limits.tolist()],
@@ -344,21 +363,21 @@ def write_episodes_mcap(path: Path, robot: RobotSpec, paths, records: list[Episo
     t_ns = 0
     for r, m, (s, q_ref, _), (tcp_ref, _), (tcp_p, tcp_q) in zip(records, per_episode, refs, tcp_refs, tcps,
                                                                   strict=True):
-        w.write("/eval/reference", {"episode": r.episode, "path": paths.names[r.path], "s": s,
-                                    "position": q_ref, "tcp_position": tcp_ref}, t_ns)
+        w.write(EVAL_REFERENCE, {"episode": r.episode, "path": paths.names[r.path], "s": s,
+                                   "position": q_ref, "tcp_position": tcp_ref}, t_ns)
         dt = r.extra["dt"]
         pos, vel, acc, tcp_p, tcp_q = (x.tolist() for x in (r.pos, r.vel, r.acc, tcp_p, tcp_q))
         series = {n: v.to(torch.float64).tolist() for n, v in (r.extra.get("task_series") or {}).items()}
         for k in range(len(pos)):
             tk = t_ns + int(round(k * dt * 1e9))
-            w.write("/eval/joint_state", {"episode": r.episode, "t": k * dt, "position": pos[k],
-                                          "velocity": vel[k], "acceleration": acc[k]}, tk)
-            w.write("/eval/tcp", {"episode": r.episode, "t": k * dt, "position": tcp_p[k],
-                                  "orientation_xyzw": tcp_q[k]}, tk)
+            w.write(EVAL_JOINT_STATE, {"episode": r.episode, "t": k * dt, "position": pos[k],
+                                       "velocity": vel[k], "acceleration": acc[k]}, tk)
+            w.write(EVAL_TCP, {"episode": r.episode, "t": k * dt, "position": tcp_p[k],
+                               "orientation_xyzw": tcp_q[k]}, tk)
             if k > 0 and series:  # feedback after step k (ball on the plate, pelvis tilt)
-                w.write("/eval/task", {"episode": r.episode, "t": k * dt, **{n: v[k - 1] for n, v in series.items()}},
+                w.write(EVAL_TASK, {"episode": r.episode, "t": k * dt, **{n: v[k - 1] for n, v in series.items()}},
                         tk)
         t_ns += int(round((r.steps + 1) * dt * 1e9))
-        w.write("/eval/episode_metrics", m, t_ns)
+        w.write(EVAL_EPISODE_METRICS, m, t_ns)
     w.close()
     os.replace(tmp, path)

@@ -114,7 +114,9 @@ def path_overlay(mcap_path: Path, metrics: dict[str, Any], title: str, path: Pat
 CURVES = {"ball": ("iiwa7 ball on a plate: controller distilled (DAgger), then PPO",
                    ("iiwa7_ball_balancing_distill", "iiwa7_ball_balancing_finetune")),
           "ball_path_law": ("iiwa7 ball on a plate: path-law controller distilled (DAgger), then PPO",
-                            ("iiwa7_ball_balancing_distill_law", "iiwa7_ball_balancing_finetune_law"))}
+                            ("iiwa7_ball_balancing_distill_law", "iiwa7_ball_balancing_finetune_law")),
+          "ball_residual": ("iiwa7 ball on a plate: PPO on a residual over the path-law controller",
+                            ("iiwa7_ball_balancing_residual",))}
 
 
 def learning_curves(curves: dict[str, dict[str, np.ndarray]], title: str, path: Path,

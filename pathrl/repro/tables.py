@@ -176,6 +176,9 @@ ROWS: tuple[Row, ...] = (
     Row(TABLE_VII, "distilled_path_law", _ball("iiwa7_ball_balancing_distill_law")),
     Row(TABLE_VII, "distilled_path_law_ppo", _ball("iiwa7_ball_balancing_finetune_law")),
     Row(TABLE_VII, "distilled_path_law_ppo/open_loop", _ball("iiwa7_ball_balancing_finetune_law", open_loop=True)),
+    # PPO on a residual over the path-law controller (pathrl.policy.residual): starts as the controller
+    Row(TABLE_VII, "residual_path_law_ppo", _ball("iiwa7_ball_balancing_residual")),
+    Row(TABLE_VII, "residual_path_law_ppo/open_loop", _ball("iiwa7_ball_balancing_residual", open_loop=True)),
     # free-standing ARMAR-4 in PyBullet, 200 paper segments each (a PyBullet episode costs ~1 s of CPU)
     Row(TABLE_VIII, "fixed_legs/no_balancing_reward", _e("armar4_target_point", "armar4", "target_point",
                                                          task="standing", episodes=200)),
@@ -195,7 +198,8 @@ NOT_IN_PAPER = frozenset({(TABLE_VII, "balancing_reward/open_loop"), (TABLE_VII,
                           (TABLE_VII, "distilled/open_loop"), (TABLE_VII, "distilled_ppo"),
                           (TABLE_VII, "distilled_ppo/open_loop"), (TABLE_VII, "model_based_feedback_path_law"),
                           (TABLE_VII, "model_based_feedback_path_law/open_loop"), (TABLE_VII, "distilled_path_law"),
-                          (TABLE_VII, "distilled_path_law_ppo"), (TABLE_VII, "distilled_path_law_ppo/open_loop")})
+                          (TABLE_VII, "distilled_path_law_ppo"), (TABLE_VII, "distilled_path_law_ppo/open_loop"),
+                          (TABLE_VII, "residual_path_law_ppo"), (TABLE_VII, "residual_path_law_ppo/open_loop")})
 
 #: Model directories that hold a model-based controller (``controller:`` in config.yaml): evaluated, not trained.
 CONTROLLER_MODELS = frozenset({"iiwa7_ball_tray_controller", "iiwa7_ball_tray_law",

@@ -16,42 +16,22 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-import torch
 from tensordict import TensorDict
 from torch import Tensor, nn
 
 from pathrl.envs.tracking import PathTrackingEnv
+from pathrl.policy.residual import ControllerObs
 
 #: Observation group that carries the teacher's action.
 TEACHER_GROUP = "teacher"
 
 
-class TeacherLabels:
+class TeacherLabels(ControllerObs):
     """A :class:`PathTrackingEnv` whose observations also hold ``controller(obs)`` (N, num_actions) as the group
     ``"teacher"``. Everything else is the wrapped env's."""
 
     def __init__(self, env: PathTrackingEnv, controller: Callable[[TensorDict], Tensor]):
-        self.env, self.controller = env, controller
-        self._steps, self._labelled_at = 0, -1
-        self._label: Tensor | None = None
-
-    def __getattr__(self, name: str):
-        return getattr(self.env, name)
-
-    def _with_label(self, obs: TensorDict) -> TensorDict:
-        if self._labelled_at != self._steps:  # the controller is stateful: once per state
-            self._label = self.controller(obs).to(torch.float32)
-            self._labelled_at = self._steps
-        obs[TEACHER_GROUP] = self._label
-        return obs
-
-    def get_observations(self) -> TensorDict:
-        return self._with_label(self.env.get_observations())
-
-    def step(self, actions: Tensor) -> tuple[TensorDict, Tensor, Tensor, dict]:
-        obs, rewards, dones, extras = self.env.step(actions)
-        self._steps += 1
-        return self._with_label(obs), rewards, dones, extras
+        super().__init__(env, controller, TEACHER_GROUP)
 
 
 class ControllerTeacher(nn.Module):

@@ -14,6 +14,7 @@ from typing import Any
 from rsl_rl.utils.log_writer import LogWriter
 
 from pathrl.logging.mcap_io import McapJsonWriter, iter_messages
+from pathrl.logging.schema import RUN_CONFIG, TRAIN_SCALARS
 
 
 class McapLogWriter(LogWriter):
@@ -26,14 +27,14 @@ class McapLogWriter(LogWriter):
         once. None (a fresh start) drops the log of an earlier failed or killed start."""
         self.path = Path(log_dir) / file_name
         kept = [] if keep_through is None else [(t, ts, m) for t, ts, m in _salvage(self.path)
-                                                if t != "/train/scalars" or m["iteration"] <= keep_through]
+                                                if t != TRAIN_SCALARS or m["iteration"] <= keep_through]
         # rewrite into a temp file and rename it over the old log: a kill in between leaves the old log whole
         tmp = self.path.with_name(f".{file_name}.tmp")
         self.writer = McapJsonWriter(tmp)
         self._config_written = False
         for topic, t, obj in kept:
             self.writer.write(topic, obj, t)
-            self._config_written |= topic == "/run/config"
+            self._config_written |= topic == RUN_CONFIG
         self.writer.flush()
         os.replace(tmp, self.path)  # the open writer goes on writing to the renamed file
         self.writer.path = self.path
@@ -44,7 +45,7 @@ class McapLogWriter(LogWriter):
     def store_config(self, env_cfg: Any, train_cfg: dict) -> None:
         if not self._config_written:
             agent = {k: v for k, v in train_cfg.items() if k != "logger"}
-            self.writer.write("/run/config", {"config": self.run_config or str(env_cfg), "train_cfg": agent})
+            self.writer.write(RUN_CONFIG, {"config": self.run_config or str(env_cfg), "train_cfg": agent})
             self._config_written = True
             self.writer.flush()
 
@@ -59,7 +60,7 @@ class McapLogWriter(LogWriter):
 
     def _emit(self) -> None:
         if self._step is not None and self._values:
-            self.writer.write("/train/scalars", {"iteration": self._step, "values": self._values})
+            self.writer.write(TRAIN_SCALARS, {"iteration": self._step, "values": self._values})
             self.writer.flush()
         self._values = {}
 

@@ -20,6 +20,7 @@ from pathrl.envs.state import restore, snapshot, snapshot_is_exact, unwrapped
 from pathrl.envs.tracking import PathTrackingEnv
 from pathrl.limits import kernels
 from pathrl.policy import policy_role
+from pathrl.policy.residual import ControllerObs, ResidualEnv, check_residual_cfg, zero_last_layer
 from pathrl.storage import (
     CheckpointError,
     atomic_write,
@@ -137,6 +138,8 @@ class PathRLRunner(OnPolicyRunner):
         saved["rng_torch"] = torch.get_rng_state()
         saved["env_state"] = snapshot(unwrapped(self.env))
         saved["env_state_exact"] = snapshot_is_exact(self.env)
+        if isinstance(self.env, ControllerObs):  # a teacher's or a residual's controller has a plan in progress
+            saved["controller_state"] = self.env.state_dict()
         save_checkpoint(saved, Path(path))
         self.logger.save_model(path, self.current_learning_iteration)
 
@@ -156,6 +159,10 @@ class PathRLRunner(OnPolicyRunner):
         if "env_state" not in loaded:
             return False
         restore(unwrapped(self.env), loaded["env_state"])
+        if isinstance(self.env, ControllerObs):
+            if "controller_state" not in loaded:
+                return False
+            self.env.load_state_dict(loaded["controller_state"])
         torch.set_rng_state(loaded["rng_torch"])
         return bool(loaded.get("env_state_exact", False))
 
@@ -227,6 +234,8 @@ def train(cfg: dict[str, Any], run_dir: Path, resume: bool = False) -> dict[str,
     distill = cfg["agent"]["algorithm"]["class_name"] == "Distillation"
     if distill:
         env = _with_teacher(cfg, env)
+    elif cfg.get("residual"):
+        env = _with_base(cfg, env)
     atomic_write(run_dir / "config.yaml", yaml.safe_dump(cfg, sort_keys=False))
     prev = json.loads((run_dir / "summary.json").read_text()) if (run_dir / "summary.json").exists() else {}
     # The observation normalizer D must be known to evaluate the policy on any other path set.
@@ -247,6 +256,8 @@ def train(cfg: dict[str, Any], run_dir: Path, resume: bool = False) -> dict[str,
         from pathrl.train.warm_start import warm_start
 
         warm_start(runner.alg, cfg["init_from"], env.num_obs, _init_std(cfg), env.robot.joints, env.robot.path_joints)
+    elif cfg.get("residual"):
+        zero_last_layer(runner.alg.get_policy())  # the untrained residual policy is its controller
     warmup = cfg.get("critic_warmup") or {}
     if int(warmup.get("iterations") or 0) > 0:
         lr = warmup.get("learning_rate")
@@ -298,7 +309,17 @@ def _with_teacher(cfg: dict[str, Any], env: PathTrackingEnv):
         raise ValueError("init_from: a distillation run starts its student from scratch; remove init_from")
     if int((cfg.get("critic_warmup") or {}).get("iterations") or 0):
         raise ValueError("critic_warmup: a distillation run has no critic")
+    if cfg.get("residual"):
+        raise ValueError("residual: a distillation run trains a whole policy, not a residual; remove residual")
     return TeacherLabels(env, make_controller(cfg["teacher"], env))
+
+
+def _with_base(cfg: dict[str, Any], env: PathTrackingEnv) -> ResidualEnv:
+    """The env of a residual run: it acts with the controller's action plus the policy's scaled residual."""
+    from pathrl.baselines.controllers import make_controller
+
+    scale, spec = check_residual_cfg(cfg["residual"])
+    return ResidualEnv(env, make_controller(spec, env), scale)
 
 
 def _config_diff(a: Any, b: Any, ignore: set[str], prefix: str = "") -> str:

@@ -18,10 +18,11 @@ def read_training_log(run_dir: Path, last_iter: int) -> tuple[int, list[dict[str
     """Env steps per iteration (from the config) and the ``/train/scalars`` messages of run.mcap up to checkpoint
     `last_iter`."""
     from pathrl.logging.mcap_io import read_messages
+    from pathrl.logging.schema import TRAIN_SCALARS
 
     cfg = yaml.safe_load((run_dir / "config.yaml").read_text())
     per_iter = int(cfg["agent"]["num_steps_per_env"]) * int(cfg["env"]["num_envs"])
-    msgs = [m for t, _, m in read_messages(run_dir / "run.mcap") if t == "/train/scalars"]
+    msgs = [m for t, _, m in read_messages(run_dir / "run.mcap") if t == TRAIN_SCALARS]
     return per_iter, [m for m in msgs if m["iteration"] <= last_iter]
 
 

@@ -12,6 +12,15 @@ from pathlib import Path
 import numpy as np
 
 from pathrl.logging.mcap_io import McapJsonWriter
+from pathrl.logging.schema import (
+    EVAL_EPISODE_METRICS,
+    EVAL_JOINT_STATE,
+    EVAL_REFERENCE,
+    EVAL_ROBOT,
+    EVAL_TCP,
+    RUN_CONFIG,
+    TRAIN_SCALARS,
+)
 
 DT = 0.1  # decision step (s), as conf/env/tracking.yaml
 
@@ -35,21 +44,7 @@ def write_synthetic_episodes(
     pidx = spec.path_index
     path = Path(path)
     with McapJsonWriter(path) as w:
-        w.write(
-            "/eval/robot",
-            {
-                "robot": spec.name,
-                "joint_names": list(spec.joints),
-                "path_joints": list(spec.path_joints),
-                "position_limits": spec.pos_limits.tolist(),
-                "velocity_limits": [[-v, v] for v in spec.vel_limits.tolist()],
-                "acceleration_limits": [[-v, v] for v in spec.acc_limits.tolist()],
-                "jerk_limits": [[-v, v] for v in spec.jerk_limits.tolist()],
-                "urdf": str(spec.urdf),
-                "tcp_links": [t.link for t in spec.tcps],
-            },
-            0,
-        )
+        w.write(EVAL_ROBOT, _robot_message(spec), 0)
         t_ns = 0
         for ep in range(episodes):
             q0 = mid + rng.uniform(-0.35, 0.35, spec.dof) * half
@@ -74,9 +69,8 @@ def write_synthetic_episodes(
             vel = np.gradient(q, dt, axis=0)
             acc = np.gradient(vel, dt, axis=0)
             vel[0] = acc[0] = 0.0
-            tcp_p, tcp_q = (x.numpy() for x in fk.tcp_poses(q))
             w.write(
-                "/eval/reference",
+                EVAL_REFERENCE,
                 {
                     "episode": ep,
                     "path": f"synthetic_{ep:04d}",
@@ -86,31 +80,11 @@ def write_synthetic_episodes(
                 },
                 t_ns,
             )
-            for k in range(n + 1):
-                tk = t_ns + int(round(k * dt * 1e9))
-                w.write(
-                    "/eval/joint_state",
-                    {
-                        "episode": ep,
-                        "t": k * dt,
-                        "position": q[k],
-                        "velocity": vel[k],
-                        "acceleration": acc[k],
-                    },
-                    tk,
-                )
-                w.write(
-                    "/eval/tcp",
-                    {"episode": ep, "t": k * dt, "position": tcp_p[k], "orientation_xyzw": tcp_q[k]},
-                    tk,
-                )
+            _write_states(w, fk, ep, q, vel, acc, t_ns, dt)
             t_ns += int(round((n + 1) * dt * 1e9))
-            dev_cm = 100 * np.linalg.norm(
-                fk.tcp_positions_np(q) - fk.tcp_positions_np(ref_at(blend * arc[-1])), axis=-1
-            )
-            jdev = np.linalg.norm(q[:, pidx] - ref_at(blend * arc[-1])[:, pidx], axis=1)
+            metrics = _metrics(fk, q, ref_at(blend * arc[-1]), pidx)
             w.write(
-                "/eval/episode_metrics",
+                EVAL_EPISODE_METRICS,
                 {
                     "episode": ep,
                     "path": f"synthetic_{ep:04d}",
@@ -119,12 +93,7 @@ def write_synthetic_episodes(
                     "duration_s": n * dt,
                     "termination": "robot_stopped",
                     "terminated_early": False,
-                    "joint_dev_mean_rad": float(jdev.mean()),
-                    "joint_dev_max_rad": float(jdev.max()),
-                    "joint_dev_final_rad": float(jdev[-1]),
-                    "cart_pos_dev_mean_cm": float(dev_cm.mean()),
-                    "cart_pos_dev_max_cm": float(dev_cm.max()),
-                    "cart_pos_dev_final_cm": float(dev_cm[-1].mean()),
+                    **metrics,
                     "limit_violations": 0,
                 },
                 t_ns,
@@ -133,13 +102,65 @@ def write_synthetic_episodes(
     return path
 
 
+def _robot_message(spec) -> dict:
+    """The ``/eval/robot`` message of a robot spec."""
+    return {
+        "robot": spec.name,
+        "joint_names": list(spec.joints),
+        "path_joints": list(spec.path_joints),
+        "position_limits": spec.pos_limits.tolist(),
+        "velocity_limits": [[-v, v] for v in spec.vel_limits.tolist()],
+        "acceleration_limits": [[-v, v] for v in spec.acc_limits.tolist()],
+        "jerk_limits": [[-v, v] for v in spec.jerk_limits.tolist()],
+        "urdf": str(spec.urdf),
+        "tcp_links": [t.link for t in spec.tcps],
+    }
+
+
+def _write_states(w: McapJsonWriter, fk, ep: int, q, vel, acc, t_ns: int, dt: float) -> None:
+    """Joint states and TCP poses of one episode's samples (N, D), starting at log time t_ns."""
+    tcp_p, tcp_q = (x.numpy() for x in fk.tcp_poses(q))
+    for k in range(len(q)):
+        tk = t_ns + int(round(k * dt * 1e9))
+        w.write(
+            EVAL_JOINT_STATE,
+            {
+                "episode": ep,
+                "t": k * dt,
+                "position": q[k],
+                "velocity": vel[k],
+                "acceleration": acc[k],
+            },
+            tk,
+        )
+        w.write(
+            EVAL_TCP,
+            {"episode": ep, "t": k * dt, "position": tcp_p[k], "orientation_xyzw": tcp_q[k]},
+            tk,
+        )
+
+
+def _metrics(fk, q: np.ndarray, q_ref: np.ndarray, pidx) -> dict[str, float]:
+    """Joint (rad) and TCP (cm) deviation of q (N, D) from q_ref (N, D): mean, max, final."""
+    dev_cm = 100 * np.linalg.norm(fk.tcp_positions_np(q) - fk.tcp_positions_np(q_ref), axis=-1)
+    jdev = np.linalg.norm(q[:, pidx] - q_ref[:, pidx], axis=1)
+    return {
+        "joint_dev_mean_rad": float(jdev.mean()),
+        "joint_dev_max_rad": float(jdev.max()),
+        "joint_dev_final_rad": float(jdev[-1]),
+        "cart_pos_dev_mean_cm": float(dev_cm.mean()),
+        "cart_pos_dev_max_cm": float(dev_cm.max()),
+        "cart_pos_dev_final_cm": float(dev_cm[-1].mean()),
+    }
+
+
 def write_synthetic_run(path: str | Path, iterations: int = 50, seed: int = 0) -> Path:
     """A ``run.mcap`` with a config message and a few RSL-RL style scalar curves."""
     rng = np.random.default_rng(seed)
     path = Path(path)
     with McapJsonWriter(path) as w:
         w.write(
-            "/run/config",
+            RUN_CONFIG,
             {
                 "config": {"robot": {"name": "iiwa7"}, "seed": seed, "reward": {"w_dev": 1.0}},
                 "train_cfg": {"num_steps_per_env": 24, "algorithm": {"class_name": "PPO"}},
@@ -155,10 +176,10 @@ def write_synthetic_run(path: str | Path, iterations: int = 50, seed: int = 0) -
             }
             if it >= 2:  # appears only after the first episodes end, as in RSL-RL
                 values["Train/mean_episode_length"] = float(60 - 20 * (1 - np.exp(-it / 15)))
-            w.write("/train/scalars", {"iteration": it, "values": values}, (it + 1) * 10**9)
+            w.write(TRAIN_SCALARS, {"iteration": it, "values": values}, (it + 1) * 10**9)
             if it >= 2:  # McapLogWriter keys RSL-RL's `.../time` tags by their step: elapsed whole seconds
                 w.write(
-                    "/train/scalars",
+                    TRAIN_SCALARS,
                     {
                         "iteration": int(2.5 * it),
                         "values": {"Train/mean_reward/time": values["Train/mean_reward"]},

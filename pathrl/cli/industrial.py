@@ -1,0 +1,146 @@
+"""``pathrl-industrial``: motion-profile optimisation on the simulated industrial controller (issue 21).
+
+    pathrl-industrial table2 [key=value ...]   baseline + MPGD per evaluation trajectory -> out_table2 (Table II)
+    pathrl-industrial speed  [key=value ...]   IWA + bisection on the speed command -> out_speed (cf. Table III)
+    pathrl-industrial sweep  [key=value ...]   baseline max error over sweep_speeds -> out_sweep
+    pathrl-industrial train  [key=value ...]   TD3 + PER policy -> run_dir (resume=true continues it)
+    pathrl-industrial table4 [key=value ...]   the policies of table4_runs (ablations) -> out_table4
+
+``table2 policy=RUN_DIR`` adds the learned IWA (the run's newest checkpoint) beside MPGD; ``speed policy=RUN_DIR``
+uses it as the inner loop instead of MPGD. ``policy=feedback:G`` is the fixed error-feedback policy a = (G, 0, 0).
+
+Keys: ``conf/industrial/app.yaml`` (schema :class:`pathrl.industrial.config.IndustrialAppCfg`), e.g.
+``rows='["Type 1 Easy"]' mpgd.k_max=20 controller.noise_mm=0.05``. Outputs are written atomically.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from pathrl.cli.common import UserError, compose, run_cli, to_container
+from pathrl.storage import atomic_write
+
+COMMANDS = ("table2", "speed", "sweep", "train", "table4")
+USAGE = "usage: pathrl-industrial {table2,speed,sweep,train,table4} [key=value ...]"
+
+
+def _setup(overrides: Sequence[str]):
+    from pathrl.industrial.config import IndustrialAppCfg, build
+    from pathrl.industrial.experiments import select_targets
+
+    bad = [o for o in overrides if "=" not in o]
+    if bad:
+        raise UserError(f"expected key=value overrides, got {bad[0]!r}; {USAGE}")
+    cfg = to_container(compose("industrial/app", overrides, IndustrialAppCfg))
+    try:
+        params = build(cfg)
+        targets = select_targets(cfg["rows"])
+    except (TypeError, ValueError) as exc:
+        raise UserError(str(exc)) from None
+    return cfg, params, targets
+
+
+def _policy(run_dir: str):
+    """(policy, column name): the deterministic policy of the newest valid checkpoint of `run_dir`; for
+    ``feedback:G`` the fixed error-feedback policy a = (G, 0, 0) (move each waypoint by G times its error); None
+    for an empty string."""
+    if not run_dir:
+        return None, "RL"
+    if run_dir.startswith("feedback:"):
+        try:
+            gain = float(run_dir.split(":", 1)[1])
+        except ValueError:
+            raise UserError(f"policy: expected feedback:<gain>, got {run_dir!r}") from None
+        return (lambda obs: np.tile([gain, 0.0, 0.0], (len(obs), 1))), f"EF({gain:g})"
+    from pathrl.industrial.rl_train import load_agent
+
+    try:
+        agent, it = load_agent(Path(run_dir))
+    except (ValueError, KeyError, TypeError) as exc:
+        raise UserError(f"policy: {exc}") from None
+    print(f"policy: {run_dir} at iteration {it}")
+    return agent.act, "RL"
+
+
+def _train(cfg, controller, rl) -> None:
+    import torch
+
+    from pathrl.industrial.rl_train import train
+
+    torch.set_num_threads(1)
+    summary = train(Path(cfg["run_dir"]), rl, controller, cfg["waypoints"], cfg["zone"], bool(cfg["resume"]),
+                    config=cfg, progress=True)
+    print(f"trained {cfg['run_dir']}: {summary}")
+
+
+def _write(path: str, text: str) -> None:
+    out = Path(path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    atomic_write(out, text)
+    print(f"wrote {out}")
+
+
+def _main(argv: list[str]) -> None:
+    if not argv or argv[0] in ("-h", "--help"):
+        if argv:
+            print(__doc__)
+            return
+        raise UserError(f"missing command; {USAGE}")
+    cmd, rest = argv[0], argv[1:]
+    if cmd not in COMMANDS:
+        raise UserError(f"unknown command {cmd!r}; choose one of {', '.join(COMMANDS)}")
+    from pathrl.industrial import experiments, tables
+
+    cfg, (controller, mpgd, search, rl), targets = _setup(rest)
+    command = " ".join(["pathrl-industrial", *argv])
+    note = ("Paper values: Wen et al., RobotStudio simulation of an ABB IRB 6640 (Table II/III); ours: the "
+            "simulated controller of pathrl.industrial (a different controller, so compare trends, not digits). "
+            "t_opt is our wall time on one CPU core; the paper's includes ~12 s of RobotStudio per execution.")
+    t0 = time.perf_counter()
+    try:
+        if cmd == "train":
+            _train(cfg, controller, rl)
+            return
+        if cmd == "table2":
+            policy, name = _policy(cfg["policy"])
+            rows = experiments.run_table2(targets, controller, mpgd, cfg["waypoints"], cfg["zone"], cfg["seed"],
+                                          policy, rl.k_max)
+            text = tables.table2_markdown(rows, command, note, name)
+            out = cfg["out_table2"]
+        elif cmd == "speed":
+            policy, name = _policy(cfg["policy"])
+            rows = experiments.run_speed(targets, controller, mpgd, search, cfg["waypoints"], cfg["zone"],
+                                         cfg["seed"], policy, rl.k_max)
+            text = tables.table3_markdown(rows, command, note, name if policy is not None else "MPGD")
+            out = cfg["out_speed"]
+        elif cmd == "table4":
+            pairs = [str(entry).split("=", 1) for entry in cfg["table4_runs"]]
+            if not pairs or any(len(p) != 2 for p in pairs):
+                raise UserError("table4: table4_runs must be a non-empty list of NAME=RUN_DIR entries")
+            policies = {name: _policy(run)[0] for name, run in pairs}
+            results = experiments.run_table4(targets, controller, policies, cfg["waypoints"], cfg["zone"], rl.k_max)
+            text = tables.table4_markdown(results, command, note)
+            out = cfg["out_table4"]
+        else:
+            speeds = [float(v) for v in cfg["sweep_speeds"]]
+            errs = experiments.baseline_sweep(targets, speeds, controller, cfg["waypoints"], cfg["zone"])
+            text = experiments.sweep_markdown(targets, speeds, errs, command)
+            out = cfg["out_sweep"]
+    except ValueError as exc:
+        raise UserError(str(exc)) from None
+    print(text)
+    _write(out, text)
+    print(f"{cmd} took {time.perf_counter() - t0:.1f} s")
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    return run_cli(_main, argv)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,77 @@
+"""``random`` generator: paths from random limit-respecting motions (docs/datasets.md)."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+import torch
+
+from pathrl.dataset.generators.context import GeneratorContext
+from pathrl.dataset.generators.paths import generate_paths
+from pathrl.dataset.generators.rollout import stored_rollout_paths
+from pathrl.dataset.io import Dataset
+from pathrl.robot.model import RobotSpec
+
+KIND = "random"
+
+
+class _RandomPolicy:
+    """Uniform random actions, optionally AR(1)-smoothed; a checkpoint every ``checkpoint_steps`` steps."""
+
+    def __init__(self, ctx: GeneratorContext, p: Mapping[str, Any], n: int, tgen: torch.Generator):
+        self.rho = float(p["action_smoothing"])
+        self.ck_steps = int(p["checkpoint_steps"])
+        self.tgen = tgen
+        self.prev = torch.zeros(n, ctx.spec.dof, dtype=torch.float64)
+
+    def reset(self, q0: torch.Tensor) -> torch.Tensor:
+        return torch.zeros(len(q0), dtype=torch.bool)
+
+    def action(self, rows, p, v, a, a_min, a_max) -> torch.Tensor:
+        u = torch.rand(a_min.shape, generator=self.tgen, dtype=torch.float64) * 2.0 - 1.0
+        if self.rho > 0:
+            u = (self.rho * self.prev[rows] + math.sqrt(1.0 - self.rho**2) * u).clamp(-1.0, 1.0)
+            self.prev[rows] = u
+        return u
+
+    def after_step(self, rows, p, steps) -> tuple[torch.Tensor, torch.Tensor]:
+        """-> (checkpoint mask, reject mask) for `rows`."""
+        return steps[rows] % self.ck_steps == 0, torch.zeros(len(rows), dtype=torch.bool)
+
+    def finished(self, rows: torch.Tensor) -> None:
+        pass
+
+    def on_rewind(self, rows, p) -> torch.Tensor:
+        self.prev[rows] = 0.0
+        return torch.zeros(len(rows), dtype=torch.bool)
+
+
+def check_robot(spec: RobotSpec) -> None:
+    """Any robot whose joints are all path joints (checked by :func:`generate_paths`)."""
+
+
+def stored_paths(
+    ctx: GeneratorContext,
+    params: Mapping[str, Any],
+    n: int,
+    rng: np.random.Generator,
+    tgen: torch.Generator,
+    stats: dict[str, int],
+) -> list[np.ndarray]:
+    """`n` stored paths of one chunk (:func:`pathrl.dataset.generators.rollout.stored_rollout_paths`)."""
+    return stored_rollout_paths(ctx, lambda b: _RandomPolicy(ctx, params, b, tgen), params, n, rng, stats)
+
+
+def generate(
+    robot_cfg: Mapping[str, Any],
+    dataset_cfg: Mapping[str, Any],
+    dest: str | None = None,
+    workers: int = 1,
+    overwrite: bool = False,
+    progress: bool = True,
+) -> Dataset:
+    """Generate and save a ``random`` dataset (:func:`pathrl.dataset.generators.paths.generate_paths`)."""
+    return generate_paths(KIND, robot_cfg, dataset_cfg, dest, workers, overwrite, progress)

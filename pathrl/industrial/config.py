@@ -1,0 +1,45 @@
+"""Config schema of ``pathrl-industrial`` (YAML in ``conf/industrial/app.yaml``; Hydra overrides on the CLI)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+from pathrl.industrial.controller import ControllerParams
+from pathrl.industrial.mpgd import MPGDParams
+from pathrl.industrial.rl import RLParams
+from pathrl.industrial.speed_search import SearchParams
+
+
+@dataclass
+class IndustrialAppCfg:
+    """Keys of the app config: the controller model, MPGD and bisection settings, the evaluation rows (names of
+    the paper's Table II rows; empty = all), waypoints and zone of the baseline profile, speeds of the baseline
+    sweep (mm/s), output files (relative to the working directory) and the seed; for the learned policy the TD3
+settings, the training run directory, whether to resume it, and the run directory whose newest checkpoint
+``table2`` evaluates beside MPGD (empty: no RL columns); ``table4`` evaluates the run directories of
+``table4_runs`` (``NAME=RUN_DIR`` entries)."""
+
+    controller: ControllerParams = field(default_factory=ControllerParams)
+    mpgd: MPGDParams = field(default_factory=MPGDParams)
+    search: SearchParams = field(default_factory=SearchParams)
+    rl: RLParams = field(default_factory=RLParams)
+    run_dir: str = "runs/industrial_td3/seed0"
+    resume: bool = False
+    policy: str = ""
+    table4_runs: list[str] = field(default_factory=list)
+    out_table4: str = "results/industrial_table4.md"
+    rows: list[str] = field(default_factory=list)
+    waypoints: int = 100
+    zone: float = 10.0
+    sweep_speeds: list[float] = field(default_factory=lambda: [250.0, 400.0, 700.0, 1100.0])
+    out_table2: str = "results/industrial_table2.md"
+    out_speed: str = "results/industrial_speed.md"
+    out_sweep: str = "results/industrial_baseline_sweep.md"
+    seed: int = 0
+
+
+def build(cfg: dict[str, Any]) -> tuple[ControllerParams, MPGDParams, SearchParams, RLParams]:
+    """The parameter dataclasses of a composed config mapping (ValueError on a bad value)."""
+    return (ControllerParams(**cfg["controller"]), MPGDParams(**cfg["mpgd"]), SearchParams(**cfg["search"]),
+            RLParams(**cfg["rl"]))

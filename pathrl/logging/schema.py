@@ -1,0 +1,51 @@
+"""MCAP topics and message layouts of pathrl's files, shared by their writers and readers.
+
+``run.mcap`` (training runs: :class:`pathrl.train.mcap_logger.McapLogWriter`, :mod:`pathrl.industrial.rl_train`):
+
+* :data:`RUN_CONFIG` once: ``{"config": resolved config, "train_cfg": RSL-RL train cfg}``;
+* :data:`TRAIN_SCALARS` per iteration: ``{"iteration": int, "values": {tag: float}}``.
+
+``episodes.mcap`` (evaluation: :func:`pathrl.eval.evaluate.write_episodes_mcap`), per episode ``e`` and
+decision step ``t`` (s):
+
+* :data:`EVAL_ROBOT` once (:data:`ROBOT_SCHEMA`): robot, joint_names, path_joints, ``<quantity>_limits`` (D, 2)
+  for the :data:`LIMIT_FIELDS`, urdf, tcp_links;
+* :data:`EVAL_REFERENCE`: episode, path, s (R,), position (R, M), tcp_position (R, T, 3);
+* :data:`EVAL_JOINT_STATE` (:data:`JOINT_STATE_SCHEMA`): episode, t, position, velocity, acceleration (D,);
+* :data:`EVAL_TCP`: episode, t, position (T, 3), orientation_xyzw (T, 4);
+* :data:`EVAL_TASK` (optional): episode, t and task feedback series (ball on the plate, pelvis tilt);
+* :data:`EVAL_EPISODE_METRICS`: the episode's metrics (:mod:`pathrl.eval.metrics`).
+
+Other ``/eval/<name>`` channels with ``episode`` and ``t`` are optional extras (the viewer draws their
+``position`` as points).
+"""
+
+from __future__ import annotations
+
+RUN_CONFIG = "/run/config"
+TRAIN_SCALARS = "/train/scalars"
+RUN_TOPICS = (TRAIN_SCALARS, RUN_CONFIG)
+
+EVAL_PREFIX = "/eval/"
+EVAL_ROBOT = "/eval/robot"
+EVAL_REFERENCE = "/eval/reference"
+EVAL_JOINT_STATE = "/eval/joint_state"
+EVAL_TCP = "/eval/tcp"
+EVAL_TASK = "/eval/task"
+EVAL_EPISODE_METRICS = "/eval/episode_metrics"
+#: the channels an episodes file must have
+EPISODE_TOPICS = (EVAL_ROBOT, EVAL_JOINT_STATE)
+KNOWN_EVAL = {EVAL_ROBOT, EVAL_REFERENCE, EVAL_JOINT_STATE, EVAL_TCP, EVAL_EPISODE_METRICS}
+
+#: limit fields of the robot message, in the order position, velocity, acceleration, jerk
+LIMIT_FIELDS = ("position_limits", "velocity_limits", "acceleration_limits", "jerk_limits")
+
+ROBOT_SCHEMA_NAME = "pathrl.RobotDescription"
+ROBOT_SCHEMA = {"type": "object", "properties": {"robot": {"type": "string"}, "joint_names": {"type": "array"},
+                "position_limits": {"type": "array"}, "velocity_limits": {"type": "array"},
+                "acceleration_limits": {"type": "array"}, "jerk_limits": {"type": "array"},
+                "urdf": {"type": "string"}}}
+JOINT_STATE_SCHEMA_NAME = "pathrl.JointState"
+JOINT_STATE_SCHEMA = {"type": "object", "properties": {"episode": {"type": "integer"}, "t": {"type": "number"},
+                      "position": {"type": "array"}, "velocity": {"type": "array"},
+                      "acceleration": {"type": "array"}}}

@@ -1,0 +1,65 @@
+"""Evaluate TrueAdapt: the reference without adaptation, or a trained run (Table I metrics), analytic or PyBullet ball.
+
+    .venv/bin/python tools/trueadapt_eval.py --task on_plate --episodes 1000            # reference, no adaptation
+    .venv/bin/python tools/trueadapt_eval.py --run runs/iiwa7_trueadapt_on_plate/seed0 [--open-loop]
+    .venv/bin/python tools/trueadapt_eval.py --task in_place --backend pybullet         # the ball in PyBullet
+
+Trajectories 0 .. episodes-1 of the split (cycled), ``--num-envs`` at a time, deterministic policy actions. Prints
+the success rate, the trajectory fraction executed before the task failed, the mean normalised |a| and |jerk| and
+the mean ball offset from its start (m) as JSON.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import torch
+
+from pathrl.cli.common import compose, to_container
+from pathrl.config.schema import TrainAppCfg
+from pathrl.envs.trueadapt import build_trueadapt_env
+from pathrl.eval.trueadapt import evaluate, reference_policy, summary
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--task", choices=["on_plate", "in_place"], default="on_plate", help="without --run")
+    ap.add_argument("--run", type=Path, default=None, help="a run directory: evaluate its latest checkpoint")
+    ap.add_argument("--dataset", default=None, help="dataset directory (default: the config's)")
+    ap.add_argument("--split", default="test")
+    ap.add_argument("--episodes", type=int, default=1000)
+    ap.add_argument("--num-envs", type=int, default=250)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--open-loop", action="store_true", help="the ball measurement stays at its initial value")
+    ap.add_argument("--backend", choices=["analytic", "pybullet"], default="analytic", help="ball simulation")
+    args = ap.parse_args()
+    torch.set_num_threads(1)
+    if args.run is None:
+        cfg = to_container(compose("train", [f"+experiment=iiwa7_trueadapt_{args.task}"], TrainAppCfg))
+    else:
+        from pathrl.eval.evaluate import load_run
+
+        cfg, ckpt, _ = load_run(args.run)
+    cfg["task"]["backend"] = args.backend
+    env = build_trueadapt_env(cfg, args.split, min(args.num_envs, args.episodes), args.dataset, args.seed,
+                              autoreset=False, **({"obs_ball": False} if args.open_loop else {}))
+    policy = reference_policy
+    if args.run is not None:
+        from pathrl.eval.evaluate import load_policy
+
+        model = load_policy(cfg, env, ckpt)
+
+        def policy(e):
+            return model(e.get_observations())
+
+    traj = torch.arange(args.episodes) % env.bank.num
+    try:
+        print(json.dumps(summary(evaluate(env, policy, traj)) | {"backend": args.backend}, indent=1))
+    finally:
+        env.close()
+
+
+if __name__ == "__main__":
+    main()

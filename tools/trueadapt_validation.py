@@ -1,0 +1,71 @@
+"""TrueAdapt Sec. VI-D: limit validation with random / maximal accelerations from the valid range, and plots.
+
+    .venv/bin/python tools/trueadapt_validation.py --trajectories 100000 --steps 100
+    .venv/bin/python tools/trueadapt_validation.py --trajectories 0 --plot docs/trueadapt_validation.png
+
+Prints the violation counts of both modes as JSON; ``--plot`` draws one trajectory per mode (joint ``--joint``:
+position, velocity, acceleration, jerk against their limits), like the paper's Figs. 5 (maximum) and 6 (random).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from dataclasses import asdict
+from pathlib import Path
+
+import torch
+
+from pathrl.eval.trueadapt_validation import MODES, trace, validate
+from pathrl.limits.feasible import JointLimits
+from pathrl.robot.model import load_robot_by_name
+
+
+def plot(limits: JointLimits, joint: int, steps: int, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from pathrl.storage import atomic_write
+
+    fig, axes = plt.subplots(4, 2, figsize=(10, 8), sharex=True)
+    start = torch.zeros(limits.dof, dtype=torch.float64)
+    start[joint] = limits.pos[joint, 0] + 0.3 * (limits.pos[joint, 1] - limits.pos[joint, 0])
+    rows = (("p", "position (rad)", limits.pos[joint]), ("v", "velocity (rad/s)", limits.vel[joint]),
+            ("a", "acceleration (rad/s²)", limits.acc[joint]), ("j", "jerk (rad/s³)", limits.jerk[joint]))
+    for col, mode in enumerate(("max", "random")):
+        tr = trace(limits, steps, mode=mode, seed=1, start=start)
+        for row, (key, label, lim) in enumerate(rows):
+            ax = axes[row, col]
+            ax.plot(tr["t"], tr[key][:, joint], lw=1.2)
+            for bound in (lim.tolist() if lim.ndim else [-float(lim), float(lim)]):
+                ax.axhline(bound, color="r", ls="--", lw=0.8)
+            ax.set_ylabel(label if col == 0 else "")
+        axes[0, col].set_title("maximum acceleration every step" if mode == "max" else "random accelerations")
+        axes[-1, col].set_xlabel("time (s)")
+    fig.suptitle(f"iiwa7 joint {joint + 1}: accelerations from the valid range (dt = 50 ms, 240 Hz samples)")
+    fig.tight_layout()
+    atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=110))
+    plt.close(fig)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--trajectories", type=int, default=100_000)
+    ap.add_argument("--steps", type=int, default=100)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--joint", type=int, default=0, help="joint index for the plot")
+    ap.add_argument("--plot", type=Path, default=None)
+    args = ap.parse_args()
+    torch.set_num_threads(1)
+    limits = JointLimits.from_robot(load_robot_by_name("iiwa7"))
+    if args.plot is not None:
+        plot(limits, args.joint, args.steps, args.plot)
+    if args.trajectories > 0:
+        out = [asdict(validate(limits, args.trajectories, args.steps, mode=m, seed=args.seed)) for m in MODES]
+        print(json.dumps(out, indent=1))
+
+
+if __name__ == "__main__":
+    main()
