@@ -186,6 +186,9 @@ ROWS: tuple[Row, ...] = (
                                                       task="standing", episodes=200)),
     Row(TABLE_VIII, "controlled_legs/balancing_reward", _e("armar4_legs_target_point_balancing", "armar4_legs",
                                                            "target_point", task="standing", episodes=200)),
+    # not in the paper: that policy's upper body with a model-based leg balance law (pathrl.baselines.balance)
+    Row(TABLE_VIII, "controlled_legs/balance_controller", _e("armar4_legs_balance_controller", "armar4_legs",
+                                                             "target_point", task="standing", episodes=200)),
 )
 
 
@@ -199,10 +202,11 @@ NOT_IN_PAPER = frozenset({(TABLE_VII, "balancing_reward/open_loop"), (TABLE_VII,
                           (TABLE_VII, "distilled_ppo/open_loop"), (TABLE_VII, "model_based_feedback_path_law"),
                           (TABLE_VII, "model_based_feedback_path_law/open_loop"), (TABLE_VII, "distilled_path_law"),
                           (TABLE_VII, "distilled_path_law_ppo"), (TABLE_VII, "distilled_path_law_ppo/open_loop"),
-                          (TABLE_VII, "residual_path_law_ppo"), (TABLE_VII, "residual_path_law_ppo/open_loop")})
+                          (TABLE_VII, "residual_path_law_ppo"), (TABLE_VII, "residual_path_law_ppo/open_loop"),
+                          (TABLE_VIII, "controlled_legs/balance_controller")})
 
 #: Model directories that hold a model-based controller (``controller:`` in config.yaml): evaluated, not trained.
-CONTROLLER_MODELS = frozenset({"iiwa7_ball_tray_controller", "iiwa7_ball_tray_law",
+CONTROLLER_MODELS = frozenset({"iiwa7_ball_tray_controller", "iiwa7_ball_tray_law", "armar4_legs_balance_controller",
                                *(greedy_model(r.evaluation) for r in TABLE_I_ROWS)})
 
 
