@@ -10,9 +10,8 @@ import numpy as np
 import torch
 
 from pathrl.dataset.generators.context import GenerationError, GeneratorContext
-from pathrl.dataset.generators.paths import generate_paths
 from pathrl.dataset.generators.rollout import _cut
-from pathrl.dataset.io import Dataset, DatasetError
+from pathrl.dataset.io import DatasetError
 from pathrl.paths.spline import PathError, resample_by_distance, sample_uniform
 from pathrl.robot.model import RobotSpec
 
@@ -187,14 +186,3 @@ def stored_paths(
     """`n` stored paths of one chunk (:func:`ball_paths`; `tgen` is not used)."""
     return ball_paths(ctx, params, n, rng, stats)
 
-
-def generate(
-    robot_cfg: Mapping[str, Any],
-    dataset_cfg: Mapping[str, Any],
-    dest: str | None = None,
-    workers: int = 1,
-    overwrite: bool = False,
-    progress: bool = True,
-) -> Dataset:
-    """Generate and save a ``ball_balancing`` dataset (:func:`pathrl.dataset.generators.paths.generate_paths`)."""
-    return generate_paths(KIND, robot_cfg, dataset_cfg, dest, workers, overwrite, progress)

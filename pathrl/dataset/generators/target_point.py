@@ -10,9 +10,7 @@ import torch
 
 from pathrl.dataset.generators.context import GeneratorContext
 from pathrl.dataset.generators.ik import solve_ik
-from pathrl.dataset.generators.paths import generate_paths
 from pathrl.dataset.generators.rollout import stored_rollout_paths
-from pathrl.dataset.io import Dataset
 from pathrl.robot.model import RobotSpec
 
 KIND = "target_point"
@@ -167,14 +165,3 @@ def stored_paths(
     """`n` stored paths of one chunk (:func:`pathrl.dataset.generators.rollout.stored_rollout_paths`)."""
     return stored_rollout_paths(ctx, lambda b: _TargetPolicy(ctx, params, b, rng, tgen), params, n, rng, stats)
 
-
-def generate(
-    robot_cfg: Mapping[str, Any],
-    dataset_cfg: Mapping[str, Any],
-    dest: str | None = None,
-    workers: int = 1,
-    overwrite: bool = False,
-    progress: bool = True,
-) -> Dataset:
-    """Generate and save a ``target_point`` dataset (:func:`pathrl.dataset.generators.paths.generate_paths`)."""
-    return generate_paths(KIND, robot_cfg, dataset_cfg, dest, workers, overwrite, progress)
