@@ -12,19 +12,14 @@ from typing import Any
 
 from pathrl.dataset.generators import GENERATORS, get_generator
 from pathrl.dataset.generators.ball_balancing import ball_constraint_violation, ball_paths, check_ball_robot
-from pathrl.dataset.generators.context import GenerationError, GeneratorContext, chunk_rngs, process_context
+from pathrl.dataset.generators.context import GenerationError, GeneratorContext, process_context
 from pathrl.dataset.generators.defaults import APPROACHES, DEFAULT_PARAMS, KINDS, resolve_params
 from pathrl.dataset.generators.ik import sample_starts, solve_ik
-from pathrl.dataset.generators.jobs import SPLIT_IDS, Job, run_jobs
+from pathrl.dataset.generators.jobs import SPLIT_IDS
 from pathrl.dataset.generators.paths import generate_chunk
 from pathrl.dataset.generators.rollout import path_valid, rollout_paths
 from pathrl.dataset.io import Dataset
 from pathrl.robot.model import load_robot
-
-# former private names, still imported by pathrl.dataset.trueadapt
-_Job = Job
-_run_jobs = run_jobs
-_rngs = chunk_rngs
 
 __all__ = [
     "APPROACHES",

@@ -242,10 +242,10 @@ def trajectory_from_waypoints(ctx: _Context, waypoints: np.ndarray, p: Mapping[s
 def generate_chunk(robot_cfg: Mapping[str, Any], params: Mapping[str, Any], seed: int, split_id: int, chunk: int,
                    n: int) -> dict[str, Any]:
     """`n` groups (1 or 4 trajectories each) from the seeded stream (seed, split, chunk)."""
-    from pathrl.dataset.generate import GenerationError, _rngs
+    from pathrl.dataset.generators.context import GenerationError, chunk_rngs
 
     ctx = _Context(robot_cfg, params)
-    rng, _ = _rngs(seed, split_id, chunk)
+    rng, _ = chunk_rngs(seed, split_id, chunk)
     areas = np.asarray(params["areas"], dtype=np.float64)
     stats: dict[str, int] = {}
     groups: list[list[np.ndarray]] = []
@@ -313,7 +313,7 @@ def generate_trueadapt(robot_cfg: Mapping[str, Any], dataset_cfg: Mapping[str, A
                        workers: int = 1, overwrite: bool = False, progress: bool = True):
     """Generate and save a TrueAdapt trajectory set (same signature as
     :func:`pathrl.dataset.generate.generate_dataset`, which dispatches here for ``kind: trueadapt``)."""
-    from pathrl.dataset.generate import _Job, _run_jobs
+    from pathrl.dataset.generators.jobs import chunk_jobs, run_jobs, split_counts
 
     robot_cfg = dict(robot_cfg)
     spec = load_robot(robot_cfg)
@@ -321,17 +321,12 @@ def generate_trueadapt(robot_cfg: Mapping[str, Any], dataset_cfg: Mapping[str, A
         raise DatasetError(f"dataset {KIND}: the level-plate IK is for the iiwa7, not robot {spec.name!r}")
     p = resolve_params(dataset_cfg.get("params"))
     seed = int(dataset_cfg.get("seed", 0))
-    counts = {"train": int(dataset_cfg.get("num_train", 0)), "test": int(dataset_cfg.get("num_test", 0))}
-    if any(c < 0 for c in counts.values()) or sum(counts.values()) == 0:
-        raise DatasetError(f"dataset.num_train / num_test must be >= 0 and not both 0, got {counts}")
+    counts = split_counts(dataset_cfg)
     dest = str(dest if dest is not None else dataset_cfg["path"])
     check_destination(dest, overwrite)
     t0 = time.perf_counter()
-    size = int(p["chunk_size"])
-    jobs = [_Job(s, c, min(size, counts[s] - c * size))
-            for s in ("train", "test") for c in range(-(-counts[s] // size))]
-
-    results = _run_jobs(jobs, _ChunkFn(robot_cfg, p, seed), workers, progress, f"{spec.name}/{KIND}",
+    jobs = chunk_jobs(counts, int(p["chunk_size"]))
+    results = run_jobs(jobs, _ChunkFn(robot_cfg, p, seed), workers, progress, f"{spec.name}/{KIND}",
                         sum(counts.values()))
     splits: dict[str, list[tuple[str, np.ndarray]]] = {"train": [], "test": []}
     gen: dict[str, float] = {}

@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import math
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
+
+from pathrl.dataset.io import DatasetError
 
 SPLIT_IDS = {"train": 0, "test": 1}
 
@@ -16,6 +19,20 @@ class Job:
     split: str
     chunk: int
     n: int
+
+
+def split_counts(dataset_cfg: Mapping[str, Any]) -> dict[str, int]:
+    """Items per split (``num_train``, ``num_test``); DatasetError (one line) if one is negative or both are 0."""
+    counts = {"train": int(dataset_cfg.get("num_train", 0)), "test": int(dataset_cfg.get("num_test", 0))}
+    if any(c < 0 for c in counts.values()) or sum(counts.values()) == 0:
+        raise DatasetError(f"dataset.num_train / num_test must be >= 0 and not both 0, got {counts}")
+    return counts
+
+
+def chunk_jobs(counts: Mapping[str, int], chunk: int) -> list[Job]:
+    """The jobs of `counts` items per split in chunks of at most `chunk`, train first."""
+    return [Job(split, c, min(chunk, counts[split] - c * chunk))
+            for split in ("train", "test") for c in range(math.ceil(counts[split] / chunk))]
 
 
 def run_jobs(

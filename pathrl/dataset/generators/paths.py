@@ -4,7 +4,6 @@ the stored knots and of the default knot strategy (whose knots are cached)."""
 
 from __future__ import annotations
 
-import math
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -15,7 +14,7 @@ import numpy as np
 from pathrl.dataset.generators import path_kind
 from pathrl.dataset.generators.context import chunk_rngs, process_context
 from pathrl.dataset.generators.defaults import resolve_params
-from pathrl.dataset.generators.jobs import SPLIT_IDS, Job, run_jobs
+from pathrl.dataset.generators.jobs import SPLIT_IDS, Job, chunk_jobs, run_jobs, split_counts
 from pathrl.dataset.io import (
     Dataset,
     DatasetError,
@@ -132,9 +131,7 @@ def _checked_request(
         )
     params = resolve_params(kind, spec.name, dataset_cfg.get("params"))
     seed = int(dataset_cfg.get("seed", 0))
-    counts = {"train": int(dataset_cfg.get("num_train", 0)), "test": int(dataset_cfg.get("num_test", 0))}
-    if any(c < 0 for c in counts.values()) or sum(counts.values()) == 0:
-        raise DatasetError(f"dataset.num_train / num_test must be >= 0 and not both 0, got {counts}")
+    counts = split_counts(dataset_cfg)
     dest = str(dest if dest is not None else dataset_cfg["path"])
     check_destination(dest, overwrite)
     if workers < 1:
@@ -161,12 +158,7 @@ def generate_paths(
     spec = load_robot(robot_cfg)
     params, seed, counts, dest = _checked_request(kind, spec, dataset_cfg, dest, workers, overwrite)
     t0 = time.perf_counter()
-    chunk = int(params["chunk_size"])
-    jobs = [
-        Job(split, c, min(chunk, counts[split] - c * chunk))
-        for split in ("train", "test")
-        for c in range(math.ceil(counts[split] / chunk))
-    ]
+    jobs = chunk_jobs(counts, int(params["chunk_size"]))
     fn = _ChunkFn(robot_cfg, kind, params, seed)
     results = run_jobs(jobs, fn, workers, progress, f"{spec.name}/{kind}", sum(counts.values()))
     strategy = KnotStrategy.from_cfg(params["default_knots"])
