@@ -46,6 +46,9 @@ from pathrl.envs.feedback import GRAVITY, ROLL_FACTOR, USABLE_HALF, plate_pose
 from pathrl.envs.tracking import PathTrackingEnv
 from pathrl.robot.kinematics import ForwardKinematics
 
+__all__ = ["TrayController", "TrayControllerCfg", "min_jerk", "plan_durations", "quintic", "quintic_coefficients",
+           "tray_normal"]
+
 
 @dataclass(frozen=True)
 class TrayControllerCfg:

@@ -31,6 +31,8 @@ from torch import Tensor
 from pathrl.baselines.tracking import linear_action, tracking_acceleration
 from pathrl.envs.tracking import PathTrackingEnv, advance
 
+__all__ = ["GreedyCfg", "GreedyFollower"]
+
 
 @dataclass(frozen=True)
 class GreedyCfg:

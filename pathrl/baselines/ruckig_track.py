@@ -30,6 +30,8 @@ import numpy as np
 
 from pathrl.baselines.toppra import ToppraResult, limit_counts
 
+__all__ = ["Tracked", "ruckig_tracked", "stopping_speeds", "track_plan"]
+
 
 @dataclass(frozen=True)
 class Tracked:

@@ -40,6 +40,7 @@ import time
 from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
+from enum import StrEnum
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -62,6 +63,10 @@ if TYPE_CHECKING:
     from pathrl.paths.segments import Segments
     from pathrl.robot.model import RobotSpec
 
+__all__ = ["GRID_STEP", "MARGIN", "MAX_ITERATIONS", "REFINE_ITERATIONS", "RESCALE_MARGIN", "VIOLATION_KEYS",
+           "ToppraResult", "ToppraStatus", "path_limits", "solve_plan", "solve_segment"]
+
+
 #: Default spacing (rad of arc length) of the uniform part of the gridpoints.
 GRID_STEP = 0.02
 #: Relative safety margin on the velocity / acceleration limits given to toppra.
@@ -76,6 +81,21 @@ MAX_ITERATIONS = 12
 VIOLATION_KEYS = ("position", "velocity", "acceleration")
 
 
+class ToppraStatus(StrEnum):
+    """Result code of one solved segment (:attr:`ToppraResult.status`); a ``str``, so reports keep the plain names
+    (``"status": "ok"``) and comparisons with the names still hold."""
+
+    OK = "ok"  # solved, no limit violation at the control rate
+    VIOLATIONS = "violations"  # solved, residual violations after the last solve
+    INFEASIBLE = "infeasible"  # toppra found no parameterisation
+    EMPTY = "empty"  # zero-length segment
+
+    @property
+    def solved(self) -> bool:
+        """A trajectory exists (ok or violations)."""
+        return self in (ToppraStatus.OK, ToppraStatus.VIOLATIONS)
+
+
 @dataclass
 class ToppraResult:
     """One solved segment.
@@ -85,8 +105,8 @@ class ToppraResult:
     max_joint_dev_rad: max Euclidean joint-space distance between the control-rate samples and the
         geometric path at the same path parameter (0 up to float error: the trajectory is q(s(t))).
     q, qd, qdd: (T, M) samples at t = k / control_rate, the last one at t = duration (rest).
-    status: ``ok`` (no violation), ``violations`` (residual violations after the last solve),
-        ``infeasible`` (toppra failed) or ``empty`` (zero-length segment).
+    status: :class:`ToppraStatus`: ``ok`` (no violation), ``violations`` (residual violations after the last
+        solve), ``infeasible`` (toppra failed) or ``empty`` (zero-length segment).
     vel_scale, acc_scale: factors applied to the velocity / acceleration limits of the final solve.
     violations: control-rate samples x joints beyond each limit (position, velocity, acceleration).
     max_vel_ratio, max_acc_ratio: max |qd| / vel_limit and |qdd| / acc_limit over the samples.
@@ -100,7 +120,7 @@ class ToppraResult:
     q: np.ndarray
     qd: np.ndarray
     qdd: np.ndarray
-    status: str
+    status: ToppraStatus
     vel_scale: float = 1.0
     acc_scale: float = 1.0
     violations: dict[str, int] = field(default_factory=dict)
@@ -125,12 +145,13 @@ class ToppraResult:
 
     @property
     def ok(self) -> bool:
-        return self.status == "ok"
+        """No limit violation (status ok)."""
+        return self.status == ToppraStatus.OK
 
     def summary(self) -> dict[str, float | int | str]:
         """JSON-friendly scalars (no samples)."""
         return {
-            "status": self.status,
+            "status": self.status.value,
             "duration_s": self.duration_s,
             "solve_time_s": self.solve_time_s,
             "max_joint_dev_rad": self.max_joint_dev_rad,
@@ -287,7 +308,7 @@ def solve_segment(
     start_s, end_s = float(np.clip(start_s, 0.0, length)), float(np.clip(end_s, 0.0, length))
     empty = np.zeros((0, m))
 
-    def result(status: str, **kw) -> ToppraResult:
+    def result(status: ToppraStatus, **kw) -> ToppraResult:
         kw.setdefault("duration_s", math.nan)
         kw.setdefault("max_joint_dev_rad", math.nan)
         return ToppraResult(
@@ -300,17 +321,18 @@ def solve_segment(
         )
 
     if end_s - start_s < 1e-9:
-        return result("empty", duration_s=0.0, max_joint_dev_rad=0.0)
+        return result(ToppraStatus.EMPTY, duration_s=0.0, max_joint_dev_rad=0.0)
     u0, u1 = np.interp([start_s, end_s], s_table, u_table)
     seg = SegmentPath(spline, u0, u1)
     grid = segment_gridpoints(u_table, s_table, chord_params(knots), start_s, end_s, u0, u1, grid_step)
     sol = _solve_refined(seg, grid, vel, acc, start_rate, control_rate, max_iterations, refine_iterations, margin)
     vel_scale, acc_scale, grid, it = sol.vel_scale, sol.acc_scale, sol.grid, sol.iterations
     if not sol.feasible:
-        return result("infeasible", vel_scale=vel_scale, acc_scale=acc_scale, num_gridpoints=len(grid), iterations=it)
+        return result(ToppraStatus.INFEASIBLE, vel_scale=vel_scale, acc_scale=acc_scale, num_gridpoints=len(grid),
+                      iterations=it)
     q = seg(sol.r)
     res = result(
-        "ok",
+        ToppraStatus.OK,
         duration_s=sol.duration,
         q=q if keep_trajectory else empty,
         qd=sol.qd if keep_trajectory else empty,
@@ -322,7 +344,7 @@ def solve_segment(
         iterations=it,
     )
     if res.num_violations:
-        res.status = "violations"
+        res.status = ToppraStatus.VIOLATIONS
     res.solve_time_s = time.perf_counter() - t_begin
     return res
 
@@ -360,7 +382,7 @@ def _solve_chunk(
             grid_step=grid_step,
             keep_trajectory=keep or track,
         )
-        if track and res.status in ("ok", "violations") and len(res.q):
+        if track and res.status.solved and len(res.q):
             from pathrl.baselines.ruckig_track import ruckig_tracked
 
             res.tracked = ruckig_tracked(res, limits, control_rate)

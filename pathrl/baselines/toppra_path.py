@@ -8,6 +8,10 @@ import math
 import numpy as np
 from scipy.interpolate import BSpline
 
+__all__ = ["CHECK_RTOL", "MIN_GRIDPOINTS", "SegmentPath", "as_toppra_path", "const_accel_eval", "limit_counts",
+           "merge_gridpoints", "sample_times", "segment_gridpoints", "toppra_module"]
+
+
 #: Minimum number of gridpoints of a segment (short segments).
 MIN_GRIDPOINTS = 100
 #: Relative tolerance of the control-rate limit check (float noise only).

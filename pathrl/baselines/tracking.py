@@ -5,6 +5,8 @@ from __future__ import annotations
 
 from torch import Tensor
 
+__all__ = ["linear_action", "tracking_acceleration"]
+
 
 def tracking_acceleration(pos: Tensor, vel: Tensor, acc: Tensor, q_d: Tensor, v_d: Tensor, a_d: Tensor, dt: float,
                           omega: float) -> Tensor:

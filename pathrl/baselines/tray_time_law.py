@@ -32,6 +32,8 @@ from pathrl.baselines.toppra import SegmentPath, as_toppra_path, const_accel_eva
 from pathrl.paths.pathset import PathSet
 from pathrl.paths.spline import arc_length_table, fit_spline
 
+__all__ = ["PlateAccelerationConstraint", "TimeLawCfg", "TimeLawTable", "build_time_laws", "tray_time_law"]
+
 
 @dataclass(frozen=True)
 class TimeLawCfg:

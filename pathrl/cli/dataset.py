@@ -39,6 +39,8 @@ def _fmt_stats(st: Mapping[str, Any]) -> str:
 
 
 def print_info(meta: Mapping[str, Any], path: str, out=None) -> None:
+    """Print a dataset's ``dataset.json`` metadata `meta` (found at `path`) to `out` (default stdout): format,
+    robot, hash, splits, knot strategies and per-split statistics (path lengths in rad)."""
     out = out or sys.stdout
     print(f"dataset   {path}", file=out)
     print(
@@ -97,6 +99,8 @@ def print_limits(ds, out=None) -> None:
 
 
 def cmd_generate(overrides: Sequence[str]) -> None:
+    """``pathrl-dataset generate key=value ...``: compose ``conf/dataset_app.yaml`` with the overrides, generate the
+    dataset and print its summary; bad overrides or generation errors are one-line :class:`UserError`."""
     from pathrl.dataset.generate import GenerationError, generate_dataset
     from pathrl.dataset.io import DatasetError
     from pathrl.robot.model import RobotConfigError
@@ -123,6 +127,8 @@ def cmd_generate(overrides: Sequence[str]) -> None:
 
 
 def cmd_import(argv: Sequence[str]) -> None:
+    """``pathrl-dataset import --format kiemel-json --robot R SRC DEST``: convert paths in the format of the
+    paper's original code (:mod:`pathrl.dataset.kiemel`) into a dataset at DEST; print its summary and limit check."""
     from pathrl.dataset.io import DatasetError
     from pathrl.dataset.kiemel import import_kiemel
     from pathrl.robot.model import RobotConfigError, load_robot_by_name
@@ -147,6 +153,7 @@ def cmd_import(argv: Sequence[str]) -> None:
 
 
 def cmd_info(argv: Sequence[str]) -> None:
+    """``pathrl-dataset info DEST``: print a dataset's summary and its position-limit check."""
     from pathrl.dataset.io import DatasetError, load_dataset
 
     ap = _Parser(prog="pathrl-dataset info")
@@ -178,6 +185,7 @@ def _main(argv: list[str]) -> None:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``pathrl-dataset {generate,import,info}`` (argv: sys.argv[1:]); returns the exit code."""
     return run_cli(_main, argv)
 
 

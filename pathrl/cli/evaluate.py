@@ -44,14 +44,16 @@ def _bool(args: dict[str, str], key: str, default: bool) -> bool:
 
 def _main(argv: list[str]) -> None:
     from pathrl.dataset.io import DatasetError
+    from pathrl.envs.registry import TASKS
     from pathrl.eval.evaluate import RunError, evaluate, load_run
 
     args = parse_key_values(argv, KEYS, USAGE, required=("run_dir",))
     segments = args.get("segments", "paper")
     if segments not in ("paper", "full"):
         raise UserError(f"segments must be paper or full, got {segments!r}")
-    if args.get("task", "ball_on_plate") not in ("ball_on_plate", "standing", "tracking"):
-        raise UserError(f"task must be ball_on_plate, standing or tracking, got {args['task']!r}")
+    path_tasks = [name for name, t in TASKS.items() if not t.adapt]  # tasks an evaluation can add to a run
+    if args.get("task", "tracking") not in path_tasks:
+        raise UserError(f"task must be one of {', '.join(path_tasks)}, got {args['task']!r}")
     if args.get("dataset.out_of_limits", "refuse") not in ("refuse", "clip"):
         raise UserError(f"dataset.out_of_limits must be refuse or clip, got {args['dataset.out_of_limits']!r}")
     if args.get("backend", "pybullet") not in ("pybullet", "analytic"):

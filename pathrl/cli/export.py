@@ -21,7 +21,8 @@ KEYS = {"run_dir", "out", "dataset.path", "observations"}
 def _main(argv: list[str]) -> None:
     from pathrl.dataset.io import DatasetError, load_pathset
     from pathrl.deploy.export import export_policy
-    from pathrl.envs.factory import env_cfg_from, task_cfg
+    from pathrl.envs.factory import env_cfg_from
+    from pathrl.envs.registry import EVAL_ENV, get_task
     from pathrl.eval.evaluate import RunError, load_run
     from pathrl.paths.knots import KnotStrategy
     from pathrl.robot.model import load_robot
@@ -40,8 +41,12 @@ def _main(argv: list[str]) -> None:
         raise UserError(str(exc)) from None
     if ckpt is None:
         raise UserError(f"{run_dir}: a model-based controller has no network to export")
-    if task_cfg(cfg)["feedback"] is not None:
-        raise UserError(f"{run_dir}: exporting policies of feedback tasks ({task_cfg(cfg)['feedback']}) is not "
+    try:
+        feedback = get_task(cfg).feedback
+    except ValueError as exc:
+        raise UserError(f"{run_dir}: {exc}") from None
+    if feedback is not None:
+        raise UserError(f"{run_dir}: exporting policies of feedback tasks ({feedback}) is not "
                         "supported (their state needs the task's sensor)")
     robot = load_robot(cfg["robot"])
     ds = args.get("dataset.path") or cfg["dataset"]["path"]
@@ -53,7 +58,7 @@ def _main(argv: list[str]) -> None:
         raise UserError(str(exc).splitlines()[0] if str(exc) else repr(exc)) from None
     env_cfg = replace(env_cfg_from(cfg, num_envs=min(8, paths.num_paths), seed=0,
                                    knot_gap_norm=summary.get("knot_gap_norm")),
-                      autoreset=False, device="cpu", max_deviation=None, fail_terminates=False)
+                      **EVAL_ENV)
     out = Path(args.get("out") or run_dir / "export")
     try:
         report = export_policy(cfg, ckpt, paths, env_cfg, robot, out, count)

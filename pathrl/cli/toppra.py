@@ -40,7 +40,7 @@ def summarize(results, plan, paths, meta: dict[str, Any]) -> dict[str, Any]:
 
     from pathrl.baselines.toppra import VIOLATION_KEYS
 
-    solved = [r for r in results if r.status in ("ok", "violations")]
+    solved = [r for r in results if r.status.solved]
     by_kind = {k: int(sum(r.violations.get(k, 0) for r in results)) for k in VIOLATION_KEYS}
     jerk_max = [r.max_jerk for r in solved]
     jerk_ratio = [r.max_jerk_ratio for r in solved]
@@ -59,7 +59,7 @@ def summarize(results, plan, paths, meta: dict[str, Any]) -> dict[str, Any]:
                 "max_joint_dev_rad": _num(r.max_joint_dev_rad),
                 "solve_time_s": float(r.solve_time_s),
                 "violations": r.num_violations,
-                "status": r.status,
+                "status": r.status.value,
                 "vel_scale": r.vel_scale,
                 "acc_scale": r.acc_scale,
                 "max_vel_ratio": _num(r.max_vel_ratio),

@@ -18,7 +18,7 @@ from hydra.types import RunMode
 from omegaconf import DictConfig, OmegaConf
 
 from pathrl.cli import sweep_report
-from pathrl.cli.common import CONF_DIR
+from pathrl.config.paths import CONF_DIR
 from pathrl.config.store import register
 
 register()
@@ -55,20 +55,13 @@ def _precheck(argv: list[str]) -> None:
         return
     from pathrl.cli.common import UserError, compose, to_container
     from pathrl.config.schema import TrainAppCfg
-    from pathrl.envs.factory import env_cfg_from, is_trueadapt
-    from pathrl.envs.rewards import build_reward_terms
+    from pathrl.envs.registry import check_task
     from pathrl.train.runner import check_run_cfg
 
     try:
         cfg = to_container(compose("train", argv, TrainAppCfg))
         check_run_cfg(cfg)
-        if is_trueadapt(cfg):  # its own env and reward (pathrl.envs.trueadapt)
-            from pathrl.envs.trueadapt import check_adapt_cfg
-
-            check_adapt_cfg(cfg)
-        else:
-            env_cfg_from(cfg)  # the env's values (TrackingEnvCfg checks them); the dataset is checked by the run
-            build_reward_terms(cfg["reward"]["terms"])
+        check_task(cfg)  # the task's env and reward values (pathrl.envs.registry); the dataset is checked by the run
     except (UserError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         raise SystemExit(2) from None

@@ -24,6 +24,9 @@ from pathrl.paths.pathset import PathSet
 from pathrl.paths.segments import evaluation_plan
 from pathrl.storage import atomic_write
 
+__all__ = ["EXPORT_ATOL", "env_obs", "export_policy", "float32_actor", "record_observations"]
+
+
 #: Largest |export - PyTorch| accepted by the check (float32 actions in [-1, 1]).
 EXPORT_ATOL = 1e-5
 

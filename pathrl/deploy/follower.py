@@ -22,7 +22,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from pathrl.envs.factory import env_cfg_from, task_cfg
+from pathrl.envs.factory import env_cfg_from
+from pathrl.envs.registry import EVAL_ENV, get_task
 from pathrl.envs.rewards import build_reward_terms
 from pathrl.envs.tracking import PathTrackingEnv
 from pathrl.eval.evaluate import load_policy, load_run
@@ -32,6 +33,9 @@ from pathrl.paths.knots import KnotStrategy
 from pathrl.paths.pathset import PathSet, build_pathset
 from pathrl.paths.segments import full_segments
 from pathrl.robot.model import RobotSpec, load_robot
+
+__all__ = ["START_TOLERANCE", "Follower", "FollowerError", "Setpoints"]
+
 
 #: Largest weighted joint distance (rad) between the robot and the start of a path it is asked to follow.
 START_TOLERANCE = 0.05
@@ -55,13 +59,15 @@ class Follower:
     """A shipped policy following one path at a time (module docstring)."""
 
     def __init__(self, cfg: dict, checkpoint: Path, knot_gap: float, robot: RobotSpec):
-        if task_cfg(cfg)["feedback"] is not None:
-            raise FollowerError(f"the follower runs path-tracking policies; this one needs the "
-                                f"{task_cfg(cfg)['feedback']} sensor")
+        try:
+            feedback = get_task(cfg).feedback
+        except ValueError as exc:
+            raise FollowerError(str(exc)) from None
+        if feedback is not None:
+            raise FollowerError(f"the follower runs path-tracking policies; this one needs the {feedback} sensor")
         self.robot, self.cfg, self.checkpoint = robot, cfg, checkpoint
         self.knots = KnotStrategy.from_cfg(cfg["knots"])
-        self.env_cfg = replace(env_cfg_from(cfg, num_envs=1, seed=0, knot_gap_norm=knot_gap), autoreset=False,
-                               device="cpu", max_deviation=None, fail_terminates=False)
+        self.env_cfg = replace(env_cfg_from(cfg, num_envs=1, seed=0, knot_gap_norm=knot_gap), **EVAL_ENV)
         self.env: PathTrackingEnv | None = None
         self.policy: torch.nn.Module | None = None
         self._stopping = False

@@ -1,15 +1,18 @@
-"""Build a tracking env from a resolved run config (dataset -> robot, knots, reward, feedback task -> env): shared
-by training, evaluation and deployment."""
+"""Config glue of the tracking env, shared by training, evaluation and deployment: the env settings of a resolved
+run config (:func:`env_cfg_from`), its task group with the keys saved runs lack (:func:`task_cfg`, :data:`NO_TASK`,
+:data:`ADDED_KEYS`) and the task's feedback source (:func:`make_feedback`). Which env a task builds is decided by
+the task registry (:mod:`pathrl.envs.registry`, :func:`~pathrl.envs.registry.make_env`)."""
 
 from __future__ import annotations
 
 from typing import Any
 
-from pathrl.dataset.io import load_pathset
-from pathrl.envs.rewards import build_reward_terms
-from pathrl.envs.tracking import PathTrackingEnv, TrackingEnvCfg
-from pathrl.paths.knots import KnotStrategy
-from pathrl.robot.model import RobotSpec, load_robot
+from pathrl.envs.tracking_cfg import TrackingEnvCfg
+from pathrl.robot.model import RobotSpec
+
+__all__ = ["ADDED_KEYS", "FEEDBACKS", "FEEDBACK_BACKENDS", "NO_TASK", "build_env", "env_cfg_from", "is_trueadapt",
+           "make_feedback", "task_cfg"]
+
 
 #: Config keys added after runs were saved, with the value that reproduces what those runs did: a saved config
 #: without the key resumes under a config holding this value (and is evaluated with it, `env_cfg_from`).
@@ -22,6 +25,8 @@ ADDED_KEYS: dict[str, Any] = {"dataset.out_of_limits": "refuse",
 
 def env_cfg_from(cfg: dict[str, Any], num_envs: int | None = None, seed: int | None = None,
                  knot_gap_norm: float | None = None) -> TrackingEnvCfg:
+    """The tracking env settings of a resolved config (keys missing in saved runs take their :data:`ADDED_KEYS`
+    value); `num_envs`, `seed`, `knot_gap_norm` replace the config's."""
     e, task = cfg["env"], task_cfg(cfg)
     return TrackingEnvCfg(
         num_envs=int(num_envs or e["num_envs"]),
@@ -61,12 +66,15 @@ FEEDBACKS = ("ball_on_plate", "standing")
 
 
 def task_cfg(cfg: dict[str, Any]) -> dict[str, Any]:
+    """The ``task`` group of a config with the keys of runs saved before tasks existed filled in (:data:`NO_TASK`)."""
     return {**NO_TASK, **(cfg.get("task") or {})}
 
 
 def is_trueadapt(cfg: dict[str, Any]) -> bool:
-    """Whether a config's task is a TrueAdapt trajectory adaptation (``task.adapt`` set)."""
-    return bool(task_cfg(cfg).get("adapt"))
+    """Whether a config's task is a TrueAdapt trajectory adaptation (its registered task; ``task.adapt`` set)."""
+    from pathrl.envs.registry import get_task
+
+    return get_task(cfg).adapt
 
 
 def make_feedback(cfg: dict[str, Any], robot: RobotSpec, num_envs: int, seed: int, backend: str | None = None):
@@ -106,16 +114,9 @@ def build_env(
     dataset_path: str | None = None,
     knot_gap_norm: float | None = None,
     seed: int | None = None,
-) -> PathTrackingEnv:
-    """The tracking env of a resolved config on a dataset split."""
-    if is_trueadapt(cfg):  # a TrueAdapt task (task.adapt): its own env (pathrl.envs.trueadapt)
-        from pathrl.envs.trueadapt import build_trueadapt_env
+):
+    """The env of a resolved config's task on a dataset split; kept for callers of the old name, the same as
+    :func:`pathrl.envs.registry.make_env`."""
+    from pathrl.envs.registry import make_env
 
-        return build_trueadapt_env(cfg, split, num_envs, dataset_path, seed)
-    robot: RobotSpec = load_robot(cfg["robot"])
-    knots = KnotStrategy.from_cfg(cfg["knots"])
-    paths = load_pathset(dataset_path or cfg["dataset"]["path"], split, knots, robot=robot,
-                         out_of_limits=str(cfg["dataset"].get("out_of_limits", "refuse")))
-    env_cfg = env_cfg_from(cfg, num_envs, seed, knot_gap_norm)
-    feedback = make_feedback(cfg, robot, env_cfg.num_envs, env_cfg.seed)
-    return PathTrackingEnv(env_cfg, robot, paths, build_reward_terms(cfg["reward"]["terms"]), feedback)
+    return make_env(cfg, split, num_envs=num_envs, dataset_path=dataset_path, knot_gap_norm=knot_gap_norm, seed=seed)

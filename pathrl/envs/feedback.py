@@ -21,6 +21,12 @@ from torch import Tensor
 from pathrl.robot.kinematics import ForwardKinematics
 from pathrl.robot.model import RobotSpec
 
+__all__ = ["BALL_RADIUS_MM", "GRAVITY", "PLACE_MARGIN", "PLATE_BORDER", "PLATE_SIZE", "RES_FACTOR", "ROLL_FACTOR",
+           "ROLL_MU_1E4", "USABLE_HALF", "AnalyticBall", "Feedback", "FeedbackStep", "FrozenSensor", "PlateDrive",
+           "PlateIMU", "ball_observation", "inplane_force", "mean_drive", "plate_pose", "rolling_resistance",
+           "sample_ball_radius", "sample_ball_xy", "sample_rolling_friction"]
+
+
 GRAVITY = 9.81  # m/s^2
 
 # Plate and ball geometry (the authors' values, original_pathtracking.md 8.1); shared with pathrl.sim.ball_plate.

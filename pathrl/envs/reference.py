@@ -18,6 +18,8 @@ from pathrl.envs.rewards import RewardTerm, StepQuantities
 from pathrl.paths.spline import arc_length_table, chord_params, dedupe_knots, fit_spline
 from pathrl.robot.model import RobotSpec
 
+__all__ = ["ReferencePath", "ReferenceStep", "ReferenceTrackingEnv"]
+
 
 class ReferencePath:
     """One path: spline over chord length, arc length <-> parameter tables, knot arc lengths."""

@@ -16,6 +16,10 @@ from typing import Any
 import torch
 from torch import Tensor
 
+__all__ = ["REWARD_TERMS", "TASK_VALUES", "RewardFn", "RewardTerm", "StepQuantities", "action_saturation",
+           "ball_centre", "ball_drive", "base_orientation", "base_position", "base_tilt", "build_reward_terms",
+           "deviation_max", "deviation_mean", "path_length"]
+
 
 @dataclass(frozen=True)
 class StepQuantities:

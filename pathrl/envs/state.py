@@ -14,6 +14,9 @@ from typing import Any
 import torch
 from torch import Tensor
 
+__all__ = ["restore", "snapshot", "snapshot_is_exact", "unwrapped"]
+
+
 _GEN = "__generator__"
 
 

@@ -55,10 +55,12 @@ from tensordict import TensorDict
 from torch import Tensor
 
 from pathrl import native
+from pathrl.envs import terminations as terms
 from pathrl.envs.feedback import Feedback
 from pathrl.envs.rewards import TASK_VALUES, RewardTerm, StepQuantities
-from pathrl.envs.tracking_cfg import FREE_JOINT_ACTIONS, TERMINATION_REASONS, TrackingEnvCfg  # noqa: F401 (moved)
-from pathrl.limits.braking import braking_within, is_stopped
+from pathrl.envs.terminations import TERMINATION_REASONS  # noqa: F401 (moved)
+from pathrl.envs.tracking_cfg import FREE_JOINT_ACTIONS, TrackingEnvCfg  # noqa: F401 (moved)
+from pathrl.limits.braking import braking_within
 from pathrl.limits.feasible import (
     JointLimits,
     acceleration_to_action,
@@ -76,6 +78,10 @@ try:  # rsl-rl is a training dependency; the env works without it (evaluation, t
     from rsl_rl.env import VecEnv as _VecEnvBase
 except ImportError:  # pragma: no cover
     _VecEnvBase = object
+
+
+__all__ = ["FREE_JOINT_ACTIONS", "TERMINATION_REASONS", "PathTrackingEnv", "TrackingEnvCfg", "advance",
+           "observe_state", "tcp_observation"]
 
 
 @kernel(static=True)
@@ -218,6 +224,8 @@ class PathTrackingEnv(_VecEnvBase):
         self.budget = torch.full((n,), self.max_episode_length, dtype=torch.long, device=self.device)
         self.episode_length_buf = torch.zeros(n, dtype=torch.long, device=self.device)
         self.finish_step = torch.full((n,), -1, dtype=torch.long, device=self.device)
+        #: (N,) int8 TerminationReason of the last step (NONE: the episode goes on; pathrl.envs.terminations)
+        self.termination = torch.zeros(n, dtype=torch.int8, device=self.device)
         self.ep_reward = {t.name: torch.zeros(n, **f64) for t in reward_terms}
         self.ep_dev_sum = torch.zeros(n, **f64)
         self.ep_dev_max = torch.zeros(n, **f64)
@@ -427,9 +435,10 @@ class PathTrackingEnv(_VecEnvBase):
         self.last_step = {
             "moved": moved, "dev_max": dev_max, "dev_mean": dev_mean, "stopped": stopped,
             "dev_terminated": dev_term, "task_failed": task_term, "time_outs": time_outs, "reached": reached,
+            "termination": self.termination,
             **{f"task/{k}": v for k, v in task.items()},
         }
-        extras = {"time_outs": time_outs, "log": self._episode_log(dones, stopped, dev_term, task_term, time_outs)}
+        extras = {"time_outs": time_outs, "log": self._episode_log(dones, stopped)}
         if cfg.autoreset:
             self._reset_envs(dones.nonzero().squeeze(1), refresh=False)
         self._update_window()
@@ -437,30 +446,29 @@ class PathTrackingEnv(_VecEnvBase):
 
     def _end_of_step(self, dev_max: Tensor, failed: Tensor) -> tuple[Tensor, Tensor, Tensor, Tensor, Tensor, Tensor]:
         """Step 6 of the step order, after the state update: end of path -> braking; stop / deviation / task
-        failure -> terminate; budget -> time out. Returns the (N,) masks reached, stopped, dev_term, task_term,
-        terminated, time_outs."""
+        failure -> terminate; budget -> time out (the terms of :mod:`pathrl.envs.terminations`). Sets
+        ``self.termination`` (N,) to each env's reason (a ``TerminationReason``) and returns the (N,) masks
+        reached, stopped, dev_term, task_term, terminated, time_outs."""
         cfg = self.cfg
-        reached = self.s >= self.end_s - 1e-9
+        to_end = None
         if cfg.end_tolerance is not None:  # corner cutting leaves arc length uncovered at the end knot
             to_end = ((self.end_q - self.pos[:, self.path_index]) * self.dev_weights).norm(dim=1)
-            reached = reached | ((to_end <= cfg.end_tolerance) & (self.end_s - self.s < self.knot_gap))
+        reached = terms.end_reached(self.s, self.end_s, to_end, self.knot_gap, cfg.end_tolerance)
         newly = reached & (self.finish_step < 0)
         self.finish_step = torch.where(newly, self.episode_length_buf, self.finish_step)
-        stopped = self.braking & is_stopped(self.vel, self.acc, cfg.stop_tolerance)
+        stopped = terms.robot_stopped(self.braking, self.vel, self.acc, cfg.stop_tolerance)
         self.braking = self.braking | reached
-        terminated = stopped
-        dev_term = torch.zeros_like(stopped)
-        if cfg.max_deviation is not None:
-            dev_term = dev_max > cfg.max_deviation
-            terminated = terminated | dev_term
+        dev_term = terms.deviation_exceeded(dev_max, cfg.max_deviation)
+        terminated = stopped | dev_term
         task_term = failed & ~terminated if cfg.fail_terminates else torch.zeros_like(failed)
         terminated = terminated | task_term
-        time_outs = (self.episode_length_buf >= self.budget) & ~terminated
+        time_outs = terms.timed_out(self.episode_length_buf, self.budget) & ~terminated
+        self.termination = terms.termination_reason(stopped, dev_term, task_term, time_outs)
         return reached, stopped, dev_term, task_term, terminated, time_outs
 
-    def _episode_log(self, dones: Tensor, stopped: Tensor, dev_term: Tensor, task_term: Tensor,
-                     time_outs: Tensor) -> dict:
-        """Per-term episode rewards and termination shares over the episodes that ended in this step."""
+    def _episode_log(self, dones: Tensor, stopped: Tensor) -> dict:
+        """Per-term episode rewards and the share of each termination reason (``self.termination``) over the
+        episodes that ended in this step."""
         n_done = int(dones.sum())
         if n_done == 0:
             return {}
@@ -468,11 +476,10 @@ class PathTrackingEnv(_VecEnvBase):
         for name, v in self.ep_reward.items():
             log[f"Episode_Reward/{name}"] = v[dones].mean()
         steps = self.episode_length_buf[dones].to(torch.float64)
-        log["Episode_Termination/robot_stopped"] = stopped[dones].float().mean()
-        log["Episode_Termination/deviation"] = dev_term[dones].float().mean()
-        if self.feedback is not None:
-            log["Episode_Termination/task_failed"] = task_term[dones].float().mean()
-        log["Episode_Termination/time_out"] = time_outs[dones].float().mean()
+        ended = self.termination[dones]
+        for reason in terms.ENDINGS:
+            if reason is not terms.TerminationReason.TASK_FAILED or self.feedback is not None:
+                log[f"Episode_Termination/{reason.label}"] = (ended == reason).float().mean()
         log["Metrics/duration_s"] = (steps * self.cfg.dt)[stopped[dones]].mean() if bool(stopped.any()) else 0.0
         log["Metrics/dev_mean_rad"] = (self.ep_dev_sum[dones] / steps).mean()
         log["Metrics/dev_max_rad"] = self.ep_dev_max[dones].mean()

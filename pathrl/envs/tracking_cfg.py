@@ -4,6 +4,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+__all__ = ["FREE_JOINT_ACTIONS", "TrackingEnvCfg"]
+
+
 FREE_JOINT_ACTIONS = ("centred", "posture", "linear")
 
 
@@ -60,5 +63,3 @@ class TrackingEnvCfg:
             if v is not None and not float(v) > 0.0:
                 raise ValueError(f"env.{key} must be > 0 or null, got {v}")
 
-
-TERMINATION_REASONS = ("robot_stopped", "deviation", "task_failed", "time_out")

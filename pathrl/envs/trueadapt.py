@@ -350,7 +350,7 @@ def check_adapt_cfg(cfg: dict) -> None:
 
 def build_trueadapt_env(cfg: dict, split: str = "train", num_envs: int | None = None, dataset_path: str | None = None,
                         seed: int | None = None, **overrides) -> TrueAdaptEnv:
-    """The TrueAdapt env of a resolved config on a dataset split (dispatched from pathrl.envs.factory.build_env);
+    """The TrueAdapt env of a resolved config on a dataset split (built through pathrl.envs.registry.make_env);
     `overrides` replace AdaptEnvCfg fields (evaluation: ``autoreset=False``, open loop: ``obs_ball=False``)."""
     from dataclasses import replace
 

@@ -20,6 +20,9 @@ from typing import Any
 import torch
 from torch import Tensor
 
+__all__ = ["PENALTIES", "TASK_TERMS", "AdaptQuantities", "AdaptReward", "TermFn", "acceleration_penalty",
+           "build_adapt_reward", "deviation_penalty", "in_place", "jerk_penalty", "on_plate"]
+
 
 @dataclass(frozen=True)
 class AdaptQuantities:

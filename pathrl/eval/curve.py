@@ -14,6 +14,9 @@ from pathlib import Path
 
 from pathrl.storage import atomic_write, checkpoint_iteration, load_checkpoint, run_checkpoints
 
+__all__ = ["CurvePoint", "Target", "checkpoint_wall_time", "checkpoints", "curve_record", "evaluate_curve",
+           "first_reaching", "plot_curves"]
+
 
 @dataclass(frozen=True)
 class CurvePoint:

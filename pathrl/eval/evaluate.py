@@ -6,7 +6,6 @@ import json
 import os
 import sys
 import time
-from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -18,9 +17,9 @@ from tensordict import TensorDict
 
 from pathrl.baselines.controllers import make_controller
 from pathrl.dataset.io import load_pathset
-from pathrl.envs.factory import env_cfg_from, make_feedback, task_cfg
-from pathrl.envs.feedback import FrozenSensor
-from pathrl.envs.rewards import build_reward_terms
+from pathrl.envs.factory import task_cfg
+from pathrl.envs.registry import EVAL_ENV, make_env
+from pathrl.envs.terminations import TerminationReason
 from pathrl.envs.tracking import PathTrackingEnv
 from pathrl.eval.metrics import METRIC_KEYS, episode_deviations
 from pathrl.eval.rollout import EpisodeRecord, rollout
@@ -47,6 +46,9 @@ from pathrl.policy.residual import BASE_GROUP, ResidualPolicy, check_residual_cf
 from pathrl.robot.kinematics import ForwardKinematics
 from pathrl.robot.model import RobotSpec, load_robot
 from pathrl.storage import CheckpointError, latest_checkpoint, load_checkpoint, write_json_atomic
+
+__all__ = ["FAILURE_METRIC", "POLICY_MODELS", "PYBULLET_ENVS", "RunError", "committed_split", "evaluate",
+           "load_policy", "load_run", "write_episodes_mcap"]
 
 
 class RunError(ValueError):
@@ -175,18 +177,8 @@ def evaluate(
     """
     torch.set_num_threads(int(os.environ.get("PATHRL_THREADS", "1")))
     cfg, ckpt, summary = load_run(run_dir)
-    if checkpoint is not None:
-        if Path(checkpoint).name != checkpoint:
-            raise RunError(f"checkpoint={checkpoint}: give a file name in run_dir (e.g. model_99.pt)")
-        ckpt = Path(run_dir) / checkpoint
-        if not ckpt.is_file():
-            raise RunError(f"checkpoint not found: {ckpt}")
-    trained_task = task_cfg(cfg)
-    if task is not None and task != "tracking":
-        if trained_task["feedback"] not in (None, task):
-            raise RunError(f"task={task}: the run was trained with task {trained_task['feedback']}")
-        observe = trained_task["feedback"] == task and trained_task["observe"]
-        cfg = {**cfg, "task": {**trained_task, "name": task, "feedback": task, "observe": observe}}
+    ckpt = _checkpoint(run_dir, ckpt, checkpoint)
+    cfg = _with_task(cfg, task)
     robot = load_robot(cfg["robot"])
     knots = KnotStrategy.from_cfg(cfg["knots"])
     ds_path = dataset_path or committed_split(cfg["dataset"]["path"], split)
@@ -197,23 +189,18 @@ def evaluate(
     gap = summary.get("knot_gap_norm")
     if gap is None:  # runs killed before their first summary: D of the training split, as in training
         gap = load_pathset(cfg["dataset"]["path"], "train", knots, robot=robot).max_knot_gap()
-    # The deviation cut-off is a training device; evaluation tracks every episode to its end or budget (as the
-    # authors evaluated), so a policy that leaves the path is not credited with a short episode.
+    # The deviation cut-off is a training device; evaluation tracks every episode to its end or budget (EVAL_ENV).
     has_task = task_cfg(cfg)["feedback"] is not None
     if has_task and backend == "pybullet":
         num_envs = min(num_envs, PYBULLET_ENVS)  # one PyBullet client per env
-    env_cfg = replace(env_cfg_from(cfg, num_envs=min(num_envs, episodes), seed=seed, knot_gap_norm=gap),
-                      autoreset=False, device="cpu", max_deviation=None, fail_terminates=False)
     if open_loop and not has_task:
         raise RunError("open_loop=true: the run has no feedback task to freeze (give task=...)")
-    try:
-        feedback = make_feedback(cfg, robot, env_cfg.num_envs, seed, backend) if has_task else None
-    except (ValueError, RuntimeError) as exc:  # task / robot mismatch, a scene that cannot be built
+    try:  # task / robot mismatch, a scene that cannot be built
+        env = make_env(cfg, split, num_envs=min(num_envs, episodes), seed=seed, knot_gap_norm=gap, paths=paths,
+                       robot=robot, backend=backend, open_loop=open_loop, **EVAL_ENV)
+    except (ValueError, RuntimeError) as exc:
         raise RunError(str(exc)) from None
-    if open_loop:
-        feedback = FrozenSensor(feedback)
     try:
-        env = PathTrackingEnv(env_cfg, robot, paths, build_reward_terms(cfg["reward"]["terms"]), feedback)
         if "controller" in cfg:
             try:
                 policy = make_controller(cfg["controller"], env)
@@ -226,10 +213,34 @@ def evaluate(
             records = _run(env, policy, plan, episodes, progress)
         rollout_s = time.perf_counter() - t0
     finally:
-        if feedback is not None:
-            feedback.close()
+        if env.feedback is not None:
+            env.feedback.close()
     return _finish(records, rollout_s, env, robot, paths, ds_path, split, segments, seed, run_dir, ckpt, out_dir,
                    record, cfg if has_task else None, open_loop)
+
+
+def _checkpoint(run_dir: Path, latest: Path | None, name: str | None) -> Path | None:
+    """The checkpoint to evaluate: the file `name` in `run_dir` if given, else the run's `latest`."""
+    if name is None:
+        return latest
+    if Path(name).name != name:
+        raise RunError(f"checkpoint={name}: give a file name in run_dir (e.g. model_99.pt)")
+    ckpt = Path(run_dir) / name
+    if not ckpt.is_file():
+        raise RunError(f"checkpoint not found: {ckpt}")
+    return ckpt
+
+
+def _with_task(cfg: dict[str, Any], task: str | None) -> dict[str, Any]:
+    """The run's config with feedback task `task` added (None, ``tracking``: unchanged); the task's sensor is
+    observed only if the run was trained with it."""
+    if task is None or task == "tracking":
+        return cfg
+    trained_task = task_cfg(cfg)
+    if trained_task["feedback"] not in (None, task):
+        raise RunError(f"task={task}: the run was trained with task {trained_task['feedback']}")
+    observe = trained_task["feedback"] == task and trained_task["observe"]
+    return {**cfg, "task": {**trained_task, "name": task, "feedback": task, "observe": observe}}
 
 
 #: Name of the failure share in the paper's tables, per feedback task.
@@ -296,7 +307,7 @@ def _episode_metrics(r: EpisodeRecord, dev: dict[str, float], env: PathTrackingE
         "duration_s": r.duration_s,
         "duration_end_of_path_s": r.finish_step * r.extra["dt"] if r.finish_step >= 0 else None,
         "termination": r.termination,
-        "terminated_early": r.termination != "robot_stopped",
+        "terminated_early": r.termination != TerminationReason.STOPPED.label,
         # the task's ok flag (ball on the plate, robot upright) is sticky: 0 at the end <=> it failed at some point
         **(_task_failure(r, env.feedback.ok_value) if r.extra.get("task") else {}),
         **dev,

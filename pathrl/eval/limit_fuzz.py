@@ -35,6 +35,9 @@ from pathrl.limits.integrate import interpolate_step
 from pathrl.paths.knots import KnotStrategy
 from pathrl.robot.model import load_robot_by_name
 
+__all__ = ["DATASETS", "STREAMS", "FuzzResult", "fuzz_env", "fuzz_report"]
+
+
 STREAMS = ("uniform", "bang_bang", "sticky", "chatter", "nan_inf")
 #: The path set each robot's fuzz env tracks (the committed test splits).
 DATASETS = {"iiwa7": "datasets/iiwa7/random", "armar6": "datasets/armar6/random",

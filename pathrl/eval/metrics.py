@@ -18,6 +18,9 @@ from torch import Tensor
 from pathrl.paths.pathset import PathSet
 from pathrl.robot.kinematics import ForwardKinematics, quat_angle_deg
 
+__all__ = ["METRIC_KEYS", "episode_deviation", "episode_deviations", "resample_polyline"]
+
+
 METRIC_KEYS = (
     "joint_dev_mean_rad", "joint_dev_max_rad", "joint_dev_final_rad",
     "cart_pos_dev_mean_cm", "cart_pos_dev_max_cm", "cart_pos_dev_final_cm",

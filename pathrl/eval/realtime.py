@@ -29,6 +29,9 @@ from pathrl.paths.knots import KnotStrategy
 from pathrl.paths.segments import Segments, evaluation_plan
 from pathrl.robot.model import RobotSpec
 
+__all__ = ["REWARD", "main", "realtime_ratios"]
+
+
 REWARD = {"path_length": {"weight": 4.0}, "deviation_max": {"weight": 0.9}, "deviation_mean": {"weight": 0.9}}
 
 

@@ -10,9 +10,13 @@ import torch
 from tensordict import TensorDict
 from torch import Tensor
 
+from pathrl.envs.terminations import TerminationReason
 from pathrl.envs.tracking import PathTrackingEnv
 from pathrl.limits.integrate import interpolate_step
 from pathrl.paths.segments import Segments
+
+__all__ = ["EpisodeRecord", "Policy", "rollout"]
+
 
 Policy = Callable[[TensorDict], Tensor]
 
@@ -26,7 +30,7 @@ class EpisodeRecord:
     start_s: float
     end_s: float
     steps: int
-    termination: str  # robot_stopped | deviation | task_failed | time_out
+    termination: str  # the TerminationReason's label: robot_stopped | deviation | task_failed | time_out
     reached_end: bool
     finish_step: int  # step in which the end of the path was reached (-1: never)
     pos: Tensor  # (T+1, D) decision-step states
@@ -66,7 +70,7 @@ def _rollout_batch(env: PathTrackingEnv, policy: Policy, plan: Segments, ids: Te
     active = torch.zeros(env.num_envs, dtype=torch.bool, device=dev)
     active[:k] = True
     done_step = torch.full((env.num_envs,), -1, dtype=torch.long, device=dev)
-    term = ["time_out"] * k
+    term = [TerminationReason.TIME_OUT.label] * k  # episodes still running after the longest budget
     states = [(env.pos.clone(), env.vel.clone(), env.acc.clone())]
     series: list[dict[str, Tensor]] = []  # feedback values after every step (empty without a task)
     max_steps = int(math.ceil(float(env.budget[:k].max()))) + 1
@@ -82,11 +86,9 @@ def _rollout_batch(env: PathTrackingEnv, policy: Policy, plan: Segments, ids: Te
             newly = dones & active & (done_step < 0)
             if bool(newly.any()):
                 done_step[newly] = t + 1
-                info = env.last_step
+                reasons = env.termination.tolist()
                 for i in newly.nonzero().squeeze(1).tolist():
-                    term[i] = ("robot_stopped" if bool(info["stopped"][i]) else
-                               "deviation" if bool(info["dev_terminated"][i]) else
-                               "task_failed" if bool(info["task_failed"][i]) else "time_out")
+                    term[i] = TerminationReason(reasons[i]).label
                 env.simulated = active & (done_step < 0)
             if bool((done_step[:k] >= 0).all()):
                 break

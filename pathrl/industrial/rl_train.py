@@ -29,6 +29,7 @@ from pathrl.industrial.per import PrioritizedBuffer
 from pathrl.industrial.rl import N_ACTIONS, RLParams, TD3Agent
 from pathrl.industrial.trajectories import Target, type1, type1_random
 from pathrl.logging.mcap_io import McapJsonWriter
+from pathrl.logging.schema import RUN_CONFIG, TRAIN_SCALARS
 from pathrl.storage import clean_leftovers, latest_valid_checkpoint, load_checkpoint, save_checkpoint
 
 #: Speed command (mm/s) of the training trajectories per pose.
@@ -105,7 +106,7 @@ def train(run_dir: Path, params: RLParams, controller: ControllerParams, m: int 
     t0 = time.perf_counter()
     episodes, env, obs, log = 0, None, None, {"reward": [], "err": [], "loss_q": [], "loss_actor": []}
     with McapJsonWriter(run_dir / f"train_{start:06d}.mcap") as writer:
-        writer.write("/run/config", {"config": config or {}, "params": asdict(params), "resumed_from": start})
+        writer.write(RUN_CONFIG, {"config": config or {}, "params": asdict(params), "resumed_from": start})
         for it in range(start, params.iterations):
             if env is None:
                 target = training_target(int(rng.integers(params.n_train)), params.seed)
@@ -125,7 +126,7 @@ def train(run_dir: Path, params: RLParams, controller: ControllerParams, m: int 
             if (it + 1) % params.log_every == 0 or it + 1 == params.iterations:
                 scalars = {k: float(np.nanmean(v)) for k, v in log.items() if v}
                 scalars.update(episodes=episodes, buffer=len(buffer), wall_s=time.perf_counter() - t0)
-                writer.write("/train/scalars", {"iteration": it + 1, "values": scalars})
+                writer.write(TRAIN_SCALARS, {"iteration": it + 1, "values": scalars})
                 writer.flush()
                 if progress:
                     print(f"it {it + 1}: " + " ".join(f"{k}={v:.3g}" for k, v in scalars.items()), flush=True)

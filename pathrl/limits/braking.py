@@ -17,6 +17,9 @@ from torch import Tensor
 from pathrl.limits._velocity import velocity_floor
 from pathrl.limits.feasible import JointLimits, valid_acceleration_range
 
+__all__ = ["STOP_TOL", "braking_acceleration", "braking_steps_bound", "braking_within", "is_stopped"]
+
+
 STOP_TOL = 0.01  # |v| (per s) and |a| (per s^2) below which a joint counts as stopped
 
 def is_stopped(v: Tensor, a: Tensor, tol: float = STOP_TOL) -> Tensor:

@@ -13,6 +13,9 @@ from torch import Tensor
 
 from pathrl.limits.feasible import JointLimits
 
+__all__ = ["KINDS", "limit_violations"]
+
+
 KINDS = ("position", "velocity", "acceleration", "jerk")
 
 

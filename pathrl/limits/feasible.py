@@ -46,6 +46,11 @@ from pathrl.limits._knot import knot_stop_bound
 from pathrl.limits._velocity import velocity_bound, velocity_emergency, velocity_floor
 from pathrl.limits.kernels import kernel
 
+__all__ = ["CONFLICT_TOL", "DEFAULT_DT", "KNOT_SLACK", "OUTSIDE_TOL", "PLAN_MARGIN", "SETTLE_FACTOR",
+           "VEL_SKIP_MARGIN", "JointLimits", "acceleration_to_action", "action_to_acceleration",
+           "valid_acceleration_range"]
+
+
 DEFAULT_DT = 0.1
 SETTLE_FACTOR = 0.01  # klimits acceleration_after_max_vel_limit_factor of the original work
 CONFLICT_TOL = 1e-3  # klimits: ranges overlapping by less than this count as conflicting

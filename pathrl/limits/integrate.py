@@ -12,6 +12,9 @@ from torch import Tensor
 
 from pathrl.limits.kernels import kernel
 
+__all__ = ["CONTROL_RATE_HZ", "DEFAULT_SUBSTEPS", "end_of_step", "interpolate_step"]
+
+
 CONTROL_RATE_HZ = 240
 DEFAULT_SUBSTEPS = 24  # control setpoints per 0.1 s decision step at 240 Hz
 

@@ -23,6 +23,9 @@ from typing import TypeVar
 
 import torch
 
+__all__ = ["compiled", "kernel", "set_compiled", "use_compiled"]
+
+
 F = TypeVar("F", bound=Callable)
 
 _enabled = False

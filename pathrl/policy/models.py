@@ -20,6 +20,9 @@ from rsl_rl.models import MLPModel
 from rsl_rl.modules import MLP
 from torch import nn
 
+__all__ = ["HIDDEN_DTYPES", "MixedMLP", "MixedPrecisionMLPModel"]
+
+
 HIDDEN_DTYPES = {"bfloat16": torch.bfloat16, "float32": torch.float32}
 
 

@@ -20,6 +20,10 @@ import torch
 from tensordict import TensorDict
 from torch import Tensor, nn
 
+__all__ = ["BASE_GROUP", "ControllerObs", "ResidualEnv", "ResidualPolicy", "check_residual_cfg", "compose",
+           "zero_last_layer"]
+
+
 #: Observation group of a residual policy's base action.
 BASE_GROUP = "base"
 

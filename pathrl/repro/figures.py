@@ -60,12 +60,13 @@ def load_episode(mcap_path: Path, episode: int) -> dict[str, np.ndarray]:
     Returns {"reference": (S, T, 3), "executed": (K, T, 3)} for T TCPs (m).
     """
     from pathrl.logging.mcap_io import iter_messages
+    from pathrl.logging.schema import EVAL_REFERENCE, EVAL_TCP
 
     ref, exe = None, []
-    for topic, _, m in iter_messages(mcap_path, ["/eval/reference", "/eval/tcp"]):
+    for topic, _, m in iter_messages(mcap_path, [EVAL_REFERENCE, EVAL_TCP]):
         if m["episode"] != episode:
             continue
-        if topic == "/eval/reference":
+        if topic == EVAL_REFERENCE:
             ref = np.asarray(m["tcp_position"], dtype=float)
         else:
             exe.append(np.asarray(m["position"], dtype=float))

@@ -14,6 +14,8 @@ from typing import Any
 
 import numpy as np
 
+from pathrl.config.paths import CONF_DIR
+
 ASSET_DIR = Path(__file__).resolve().parent.parent / "assets" / "urdf"
 
 
@@ -129,9 +131,6 @@ def load_robot(cfg: Mapping[str, Any]) -> RobotSpec:
         workspace=workspace,
         floor_z=float(cfg.get("floor_z", 0.0)),
     )
-
-
-CONF_DIR = Path(__file__).resolve().parent.parent.parent / "conf"
 
 
 def load_robot_by_name(name: str, conf_dir: Path = CONF_DIR) -> RobotSpec:

@@ -161,6 +161,7 @@ class ScenePool:
         return self._gather()
 
     def close(self) -> None:
+        """Stop the worker processes (asked to close, killed after 10 s); safe to call twice."""
         for c in self.conns:
             try:
                 c.send(("close",))
@@ -208,6 +209,7 @@ class PyBulletBall(_PooledFeedback):
         self.prev_rel = torch.zeros(num_envs, 2, dtype=torch.float64)
 
     def reset(self, env_ids: Tensor, q: Tensor) -> None:
+        """Put a new ball on the plate of envs `env_ids` (k,) with the robots at joint positions q (k, D) (rad)."""
         if len(env_ids) == 0:
             return
         xy, on = self.pool.reset(env_ids, q)
@@ -219,6 +221,8 @@ class PyBulletBall(_PooledFeedback):
             self.imu.reset(env_ids, q)
 
     def step(self, q: Tensor, qd: Tensor, active: Tensor | None = None) -> FeedbackStep:
+        """Follow the step's control-rate setpoints q, qd (N, C, D) (rad, rad/s) in the `active` scenes (N,) bool
+        (default: all); the ball's observation, values and the envs whose ball fell off in this step."""
         xy, on = self.pool.step(q, qd, active)
         self.plate_drive.step(q)
         if self.imu is not None:
@@ -230,10 +234,13 @@ class PyBulletBall(_PooledFeedback):
         return FeedbackStep(obs=self.observe(), values=self.values(), failed=was_on & ~self.ok)
 
     def values(self) -> dict[str, Tensor]:
+        """Task values (N,) for reward terms: ball_dist (centre distance / usable half-size), ball_on_plate (1/0),
+        ball_drive (:class:`~pathrl.envs.feedback.PlateDrive`)."""
         return {"ball_dist": (self.xy / self.half).norm(dim=1), "ball_on_plate": self.ok.to(torch.float64),
                 "ball_drive": self.plate_drive.value}
 
     def observe(self) -> Tensor:
+        """The ball part of the state (N, num_obs) in [-1, 1]: previous and current relative position (+ IMU)."""
         return ball_observation(self.prev_rel, self.xy / self.half, self.imu).clamp(-1.0, 1.0)
 
 
@@ -258,6 +265,7 @@ class PyBulletStanding(_PooledFeedback):
         self.reading[:, 6] = 1.0
 
     def reset(self, env_ids: Tensor, q: Tensor) -> None:
+        """Stand the robots of envs `env_ids` (k,) upright at joint positions q (k, D) (rad)."""
         if len(env_ids) == 0:
             return
         r, ok = self.pool.reset(env_ids, q)
@@ -265,6 +273,8 @@ class PyBulletStanding(_PooledFeedback):
         self.ok[env_ids] = ok[env_ids]
 
     def step(self, q: Tensor, qd: Tensor, active: Tensor | None = None) -> FeedbackStep:
+        """Follow the step's control-rate setpoints q, qd (N, C, D) (rad, rad/s) in the `active` scenes (N,) bool
+        (default: all); the pelvis observation, values and the envs whose robot fell in this step."""
         r, ok = self.pool.step(q, qd, active)
         was_up = self.ok.clone()
         self.reading = r
@@ -272,12 +282,14 @@ class PyBulletStanding(_PooledFeedback):
         return FeedbackStep(obs=self.observe(), values=self.values(), failed=was_up & ~self.ok)
 
     def values(self) -> dict[str, Tensor]:
+        """Task values (N,): base_tilt (rad), base_offset (m), base_orientation (0..1) and upright (1/0)."""
         r = self.reading
         orient = torch.arccos(r[:, 6].abs().clamp(max=1.0)) * 2.0 / math.pi
         return {"base_tilt": r[:, 7], "base_offset": r[:, :3].norm(dim=1), "base_orientation": orient,
                 "upright": self.ok.to(torch.float64)}
 
     def observe(self) -> Tensor:
+        """The pelvis part of the state (N, 8) in [-1, 1] (class docstring)."""
         r = self.reading
         tilt = 2.0 * r[:, 7:8] / BASE_TILT_SCALE - 1.0
         return torch.cat([r[:, :3] / BASE_POS_SCALE, r[:, 3:7], tilt], dim=1).clamp(-1.0, 1.0)

@@ -43,6 +43,7 @@ class McapLogWriter(LogWriter):
         self._values: dict[str, float] = {}
 
     def store_config(self, env_cfg: Any, train_cfg: dict) -> None:
+        """Write the run config (or `env_cfg` as text) and the RSL-RL `train_cfg` (without the logger) once."""
         if not self._config_written:
             agent = {k: v for k, v in train_cfg.items() if k != "logger"}
             self.writer.write(RUN_CONFIG, {"config": self.run_config or str(env_cfg), "train_cfg": agent})
@@ -50,6 +51,8 @@ class McapLogWriter(LogWriter):
             self.writer.flush()
 
     def add_scalar(self, tag: str, scalar_value: float, global_step: int) -> None:
+        """Collect one scalar of iteration `global_step` (TensorBoard's signature); an iteration's scalars are
+        written as one message when the next iteration starts. ``*/time`` tags join the current iteration."""
         if tag.endswith("/time"):  # RSL-RL logs these against elapsed seconds, not the iteration
             self._values[tag] = float(scalar_value)
             return
@@ -65,9 +68,11 @@ class McapLogWriter(LogWriter):
         self._values = {}
 
     def flush(self) -> None:
+        """Write the scalars collected so far (the current iteration's message)."""
         self._emit()
 
     def stop(self) -> None:
+        """Write the last scalars and close the MCAP file."""
         self._emit()
         self.writer.close()
 

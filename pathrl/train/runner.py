@@ -15,7 +15,8 @@ import torch
 import yaml
 from rsl_rl.runners import DistillationRunner, OnPolicyRunner
 
-from pathrl.envs.factory import ADDED_KEYS, NO_TASK, build_env
+from pathrl.envs.factory import ADDED_KEYS, NO_TASK
+from pathrl.envs.registry import make_env
 from pathrl.envs.state import restore, snapshot, snapshot_is_exact, unwrapped
 from pathrl.envs.tracking import PathTrackingEnv
 from pathrl.limits import kernels
@@ -230,7 +231,7 @@ def train(cfg: dict[str, Any], run_dir: Path, resume: bool = False) -> dict[str,
         diff = _config_diff(saved, cfg, ignore={"resume", "iterations", "compile_limits"})
         if diff:
             raise ValueError(f"resume with a different config ({diff}); use the same overrides or a new run_dir")
-    env = build_env(cfg, "train")  # bad values and data fail here, before anything is written into run_dir
+    env = make_env(cfg, "train")  # bad values and data fail here, before anything is written into run_dir
     distill = cfg["agent"]["algorithm"]["class_name"] == "Distillation"
     if distill:
         env = _with_teacher(cfg, env)

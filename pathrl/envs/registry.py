@@ -1,0 +1,163 @@
+"""The task registry: every task a run config can name (``task.name``, ``conf/task/<name>.yaml``) and how its env
+is built. Training, evaluation and the CLIs build envs through :func:`make_env` and check configs through
+:func:`check_task`; nothing else decides by the task's keys which env a config means.
+
+Tasks:
+  tracking            plain path tracking (:class:`~pathrl.envs.tracking.PathTrackingEnv`, no feedback)
+  ball_on_plate       path tracking with a ball on a plate at the flange (``task.backend`` analytic | pybullet)
+  standing            path tracking of ARMAR-4 standing free on the floor (PyBullet)
+  trueadapt_on_plate  TrueAdapt trajectory adaptation, ball kept off the plate's border
+  trueadapt_in_place  TrueAdapt trajectory adaptation, ball kept near its start
+                      (both :class:`~pathrl.envs.trueadapt.TrueAdaptEnv`)
+
+Saved runs keep loading: a config without ``task`` is the plain tracking task (:data:`pathrl.envs.factory.NO_TASK`,
+through :func:`~pathrl.envs.factory.task_cfg`), and the names above are the ones every shipped run was saved with.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+from typing import Any
+
+from pathrl.envs.factory import env_cfg_from, make_feedback, task_cfg
+from pathrl.envs.rewards import build_reward_terms
+from pathrl.paths.pathset import PathSet
+from pathrl.robot.model import RobotSpec, load_robot
+
+__all__ = ["EVAL_ENV", "TASKS", "EnvRequest", "Task", "check_task", "get_task", "make_env", "task_names"]
+
+#: Env settings of an evaluation (and of deployment): no auto-reset, CPU, and no deviation or task-failure cut-off,
+#: so that every episode runs to its end or budget and a policy that leaves the path is not credited with a short
+#: episode (as the authors evaluated).
+EVAL_ENV: dict[str, Any] = {"autoreset": False, "device": "cpu", "max_deviation": None, "fail_terminates": False}
+
+
+@dataclass(frozen=True)
+class EnvRequest:
+    """What a caller asks of :func:`make_env` beyond the config: the dataset split and the overrides of
+    evaluation (a pre-loaded path bank, the feedback simulator, an open-loop sensor, env settings)."""
+
+    split: str = "train"
+    num_envs: int | None = None  # None: env.num_envs
+    seed: int | None = None  # None: the config's seed
+    dataset_path: str | None = None  # None: dataset.path
+    knot_gap_norm: float | None = None  # None: the path bank's largest knot gap (tracking tasks)
+    paths: PathSet | None = None  # a loaded path bank instead of dataset_path (tracking tasks)
+    robot: RobotSpec | None = None  # the loaded robot (None: loaded from the config)
+    backend: str | None = None  # feedback simulator instead of task.backend (analytic | pybullet)
+    open_loop: bool = False  # the task's sensor keeps its first value of each episode
+    overrides: tuple[tuple[str, Any], ...] = ()  # env cfg fields to replace (e.g. EVAL_ENV)
+
+
+@dataclass(frozen=True)
+class Task:
+    """One registered task: its feedback source, whether it is a TrueAdapt task, and its builder and checker."""
+
+    name: str
+    feedback: str | None  # the feedback source the task needs (task.feedback); None: none
+    adapt: bool  # a TrueAdapt trajectory-adaptation task (task.adapt set)
+    build: Callable[[dict[str, Any], EnvRequest], Any]  # (resolved config, request) -> env
+    check: Callable[[dict[str, Any]], None]  # refuse a bad config before any data is read (ValueError)
+    summary: str
+
+
+def _build_tracking(cfg: dict[str, Any], req: EnvRequest):
+    """A :class:`PathTrackingEnv` (with the task's feedback source, if any) on the requested paths."""
+    from pathrl.dataset.io import load_pathset
+    from pathrl.envs.feedback import FrozenSensor
+    from pathrl.envs.tracking import PathTrackingEnv
+    from pathrl.paths.knots import KnotStrategy
+
+    robot = req.robot or load_robot(cfg["robot"])
+    paths = req.paths
+    if paths is None:
+        paths = load_pathset(req.dataset_path or cfg["dataset"]["path"], req.split, KnotStrategy.from_cfg(cfg["knots"]),
+                             robot=robot, out_of_limits=str(cfg["dataset"].get("out_of_limits", "refuse")))
+    env_cfg = replace(env_cfg_from(cfg, req.num_envs, req.seed, req.knot_gap_norm), **dict(req.overrides))
+    feedback = make_feedback(cfg, robot, env_cfg.num_envs, env_cfg.seed, req.backend)
+    if req.open_loop:
+        if feedback is None:
+            raise ValueError("open_loop=true: the run has no feedback task to freeze (give task=...)")
+        feedback = FrozenSensor(feedback)
+    try:
+        return PathTrackingEnv(env_cfg, robot, paths, build_reward_terms(cfg["reward"]["terms"]), feedback)
+    except BaseException:
+        if feedback is not None:  # simulator processes
+            feedback.close()
+        raise
+
+
+def _check_tracking(cfg: dict[str, Any]) -> None:
+    env_cfg_from(cfg)  # the env's values (TrackingEnvCfg checks them); the dataset is checked by the run
+    build_reward_terms(cfg["reward"]["terms"])
+
+
+def _build_trueadapt(cfg: dict[str, Any], req: EnvRequest):
+    """A :class:`TrueAdaptEnv` on the requested trajectory split (open loop: the ball is not observed)."""
+    from pathrl.envs.trueadapt import build_trueadapt_env
+
+    if req.paths is not None:
+        raise ValueError("a TrueAdapt task runs on trajectories, not on a path bank")
+    if req.backend is not None:
+        cfg = {**cfg, "task": {**cfg["task"], "backend": req.backend}}
+    overrides = dict(req.overrides)
+    if req.open_loop:
+        overrides["obs_ball"] = False
+    return build_trueadapt_env(cfg, req.split, req.num_envs, req.dataset_path, req.seed, **overrides)
+
+
+def _check_trueadapt(cfg: dict[str, Any]) -> None:
+    from pathrl.envs.trueadapt import check_adapt_cfg
+
+    check_adapt_cfg(cfg)
+
+
+TASKS: dict[str, Task] = {t.name: t for t in (
+    Task("tracking", None, False, _build_tracking, _check_tracking, "plain path tracking"),
+    Task("ball_on_plate", "ball_on_plate", False, _build_tracking, _check_tracking,
+         "path tracking with a ball on a plate at the flange"),
+    Task("standing", "standing", False, _build_tracking, _check_tracking, "path tracking of ARMAR-4 standing free"),
+    Task("trueadapt_on_plate", "ball_on_plate", True, _build_trueadapt, _check_trueadapt,
+         "TrueAdapt: adapt a trajectory, keep the ball off the plate's border"),
+    Task("trueadapt_in_place", "ball_on_plate", True, _build_trueadapt, _check_trueadapt,
+         "TrueAdapt: adapt a trajectory, keep the ball near its start"),
+)}
+
+
+def task_names() -> list[str]:
+    """The registered task names (``task=<name>``)."""
+    return list(TASKS)
+
+
+def get_task(cfg: dict[str, Any]) -> Task:
+    """The registered task of a resolved run config (no ``task``: plain tracking); a one-line ValueError for an
+    unknown name, or for a config whose ``task.feedback`` / ``task.adapt`` do not fit the named task."""
+    t = task_cfg(cfg)
+    task = TASKS.get(t["name"])
+    if task is None:
+        raise ValueError(f"task.name: unknown task {t['name']!r}; known: {', '.join(TASKS)}")
+    if t["feedback"] != task.feedback:
+        raise ValueError(f"task {task.name}: task.feedback must be {task.feedback!r}, got {t['feedback']!r}")
+    if bool(t.get("adapt")) != task.adapt:
+        raise ValueError(f"task {task.name}: task.adapt must be {'set' if task.adapt else 'empty'} for this task")
+    return task
+
+
+def check_task(cfg: dict[str, Any]) -> Task:
+    """Refuse a config whose task, env or reward settings are bad, before any data is read (one-line ValueError);
+    returns its task."""
+    task = get_task(cfg)
+    task.check(cfg)
+    return task
+
+
+def make_env(cfg: dict[str, Any], split: str = "train", *, num_envs: int | None = None, seed: int | None = None,
+             dataset_path: str | None = None, knot_gap_norm: float | None = None, paths: PathSet | None = None,
+             robot: RobotSpec | None = None, backend: str | None = None, open_loop: bool = False,
+             **overrides: Any):
+    """The env of a resolved run config's task on a dataset split (:class:`EnvRequest` documents the arguments;
+    `overrides` replace env settings, e.g. ``**EVAL_ENV``)."""
+    req = EnvRequest(split, num_envs, seed, dataset_path, knot_gap_norm, paths, robot, backend, open_loop,
+                     tuple(overrides.items()))
+    return get_task(cfg).build(cfg, req)
