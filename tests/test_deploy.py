@@ -155,6 +155,21 @@ def test_settle_time_by_hand():
     assert ep([0.1, 0.3, 0.4, 0.3]).settle_s(0.15, 0.1) == float("inf")
 
 
+def test_settle_against_the_control_by_hand():
+    from pathrl.eval.path_change import excess_vs_control, settle_vs_control
+
+    control = np.array([0.1, 0.1, 0.1, 0.1, 0.3, 0.1, 0.1, 0.1])  # the path's own turn at step 4
+    assert settle_vs_control(control, control, 0.15, 0.1) == 0.0  # the control against itself
+    turn_later = np.array([0.1, 0.1, 0.1, 0.1, 0.1, 0.3, 0.1, 0.1])  # the same turn one step later: within the slack
+    assert settle_vs_control(turn_later, control, 0.15, 0.1) == 0.0
+    assert settle_vs_control(turn_later, control, 0.15, 0.1, slack_s=0.0) == pytest.approx(0.6)  # steps 0-5 count
+    change = np.array([0.2, 0.4, 0.2, 0.12, 0.35, 0.1, 0.1, 0.1])  # the change's excursion, then the turn (0.35 > 0.3)
+    assert settle_vs_control(change, control, 0.15, 0.1) == pytest.approx(0.5)
+    assert settle_vs_control(change, control, 0.15, 0.1, window_s=0.3) == pytest.approx(0.2)
+    assert excess_vs_control(change, control, 0.15, 0.1, from_s=0.3) == pytest.approx(0.05)  # 0.35 - 0.3 at step 4
+    assert excess_vs_control(change, control, 0.15, 0.1, from_s=0.5) == 0.0
+
+
 def test_branch_starts_at_the_robot_in_its_direction_and_ends_offset():
     from pathrl.eval.path_change import branch
 

@@ -61,8 +61,11 @@ def synthetic_results() -> dict:
                "dev_peak_rad_p95": 0.25, "settled_within_2s_pct": 97.5, "settle_s_median": 0.0, "settle_s_p95": 1.5,
                "duration_after_switch_s": 7.0, "toppra_duration_after_switch_s": 5.6, "learned_over_toppra": 1.25,
                "toppra_solve_ms_mean": 50.0, "toppra_from_motion_feasible_pct": 90.0, "limit_violations": 0,
-               "toppra_violations": 0}
-    path_change = {"iiwa7/random": {"variants": {"gentle": variant, "sharp": {**variant, "settle_s_p95": None}}}}
+               "toppra_violations": 0, "settled_vs_control_within_2s_pct": 98.5, "excess_after_2s_rad_median": 0.0,
+               "excess_after_2s_rad_p95": 0.0125}
+    none = {k: v for k, v in variant.items() if "control" not in k and "excess" not in k}
+    path_change = {"iiwa7/random": {"variants": {"none": none, "gentle": variant,
+                                                 "sharp": {**variant, "settle_s_p95": None}}}}
     return {"evaluations": evs, "baselines": bases, "realtime": realtime, "training": training,
             "path_change": path_change}
 
@@ -118,8 +121,9 @@ def test_renderer_hand_checked_cells():
     assert float(csv_ours[(TABLE_I, "iiwa7/random", "duration_s")]) == pytest.approx(m["duration_s"])
     assert csv_ours[(TABLE_I, "armar6/random", "duration_s")] == ""
     # path adjustments: a measured row, a settle quantile that never came (dash), a robot without results
-    assert ("| iiwa7/random gentle | 200 | 7.2 / 18.0 | 0.175 / 0.250 | **97.5** | 0.0 / 1.5 | 7.00 | 5.60 | 1.25 | "
-            "50.0 | 90.0 | 0 / 0 |") in md
+    assert ("| iiwa7/random gentle | 200 | 7.2 / 18.0 | 0.175 / 0.250 | **97.5** | 0.0 / 1.5 | 98.5 | 0.000 / 0.013 | "
+            "7.00 | 5.60 | 1.25 | 50.0 | 90.0 | 0 / 0 |") in md
+    assert "| **97.5** | 0.0 / 1.5 | – | – / – | 7.00 |" in md  # the control has no paired columns
     assert "| 0.0 / – |" in md and "| armar6/random | – |" in md
     # Table VI's Ruckig and greedy columns: duration, deviation, learned / baseline, violations
     assert (f"| 3.20 | 0.125 | **{m['duration_s'] / 3.2:.2f}** | 0 / 0 | 5.00 | 6.00 | "

@@ -15,18 +15,16 @@ from __future__ import annotations
 
 import json
 import sys
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import torch
 
-from pathrl.baselines.balance import lean_vector
+from pathrl.baselines.balance import BalanceCfg, lean_vector
 from pathrl.baselines.com import StaticCom
 from pathrl.baselines.controllers import make_controller
 from pathrl.dataset.io import load_pathset
-from pathrl.envs.factory import env_cfg_from, make_feedback
-from pathrl.envs.rewards import build_reward_terms
+from pathrl.envs.registry import EVAL_ENV, make_env
 from pathrl.envs.tracking import PathTrackingEnv
 from pathrl.eval.evaluate import PYBULLET_ENVS, load_policy, load_run
 from pathrl.eval.rollout import rollout
@@ -34,6 +32,8 @@ from pathrl.paths.knots import KnotStrategy
 from pathrl.paths.segments import evaluation_plan
 from pathrl.robot.kinematics import ForwardKinematics
 from pathrl.robot.model import load_robot
+
+ANKLE_HEIGHT = BalanceCfg.ankle_height  # m, ankle joints above the floor (the ZMP lies on the floor)
 
 
 class Recorder:
@@ -66,6 +66,8 @@ def _episode(rows: list[dict], i: int, fk: ForwardKinematics, com: StaticCom, pa
     up_acc = acc[:, path_index].abs().amax(dim=1).numpy()
     w = slice(max(0, last - int(round(1.0 / dt))), last + 1)  # the last second
     c = 100.0 * com.offset(pos).numpy()  # (T, 3) cm, static COM of the commanded posture relative to the ankles
+    vel = torch.stack([r["vel"][i] for r in steps[: last + 1]])
+    zmp = 100.0 * com.zmp(pos, vel, acc, ANKLE_HEIGHT)[0].numpy()  # (T, 2) cm, ZMP of the commanded motion
     onset = np.flatnonzero(np.abs(np.degrees(lean[:, 0])) > 2.0)
     k = int(np.argmax(np.linalg.norm(lean, axis=1)))
     return {"steps": int(last), "fall_step": failed_at,
@@ -79,6 +81,8 @@ def _episode(rows: list[dict], i: int, fk: ForwardKinematics, com: StaticCom, pa
             "com_fwd_series_cm": c[:, 0].round(2).tolist(), "com_fwd_min_cm": float(c[:, 0].min()),
             "com_fwd_at_end_cm": float(c[-1, 0]), "com_fwd_at_onset_cm": float(c[onset[0], 0]) if len(onset) else None,
             "lean_onset_s": float(onset[0] * dt) if len(onset) else None,
+            "zmp_fwd_series_cm": zmp[:, 0].round(2).tolist(), "zmp_fwd_min_cm": float(zmp[:, 0].min()),
+            "zmp_fwd_at_onset_cm": float(zmp[onset[0], 0]) if len(onset) else None,
             "lean_fwd_series_deg": np.degrees(lean[:, 0]).round(1).tolist(),
             "torso_pitch_series": pos[:, path_index[1]].numpy().round(3).tolist(),
             "leg_series": pos[:, :12].numpy().round(3).tolist(),
@@ -98,11 +102,9 @@ def study(run_dir: str, dataset: str, episodes: int, out: str, controller: dict 
     plan = type(plan)(*(getattr(plan, f)[ids] for f in ("path", "start_s", "end_s", "end_knot")))
     episodes = len(ids)
     n = min(PYBULLET_ENVS, episodes)
-    env_cfg = replace(env_cfg_from(cfg, num_envs=n, seed=0, knot_gap_norm=summary["knot_gap_norm"]),
-                      autoreset=False, device="cpu", max_deviation=None, fail_terminates=False)
-    feedback = make_feedback(cfg, robot, n, 0, "pybullet")
+    env = make_env(cfg, "test", num_envs=n, seed=0, knot_gap_norm=summary["knot_gap_norm"], paths=paths, robot=robot,
+                   backend="pybullet", **EVAL_ENV)
     try:
-        env = PathTrackingEnv(env_cfg, robot, paths, build_reward_terms(cfg["reward"]["terms"]), feedback)
         policy = make_controller(controller, env) if controller else load_policy(cfg, env, ckpt)
         fk = ForwardKinematics(robot)
         com = StaticCom(robot, ["leg_ank2_r0", "leg_ank2_r1"])
@@ -121,7 +123,7 @@ def study(run_dir: str, dataset: str, episodes: int, out: str, controller: dict 
                          finish_s=r.finish_step * env.cfg.dt if r.finish_step >= 0 else None)
                 result.append(d)
     finally:
-        feedback.close()
+        env.feedback.close()
     Path(out).write_text(json.dumps(result, indent=1))
     fell = [d for d in result if d["fall_step"] is not None]
     print(f"{len(fell)}/{len(result)} fell ({100 * len(fell) / len(result):.1f} %), mean duration "

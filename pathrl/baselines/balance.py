@@ -13,6 +13,11 @@ corrected standing posture q* (docs/armar4_balance.md):
     hips      kp_hip, kd_hip through pinv(hip axes): the trunk turns back on the legs (hip strategy)
     joints    each leg joint accelerates to q* (clipped to +-max_correction) as a critically damped second-order
               system: a = omega^2 (q* - q) - 2 omega v
+    dynamic   (off by default) from the upper body's accelerations of the next step (the network's actions):
+              ``preview`` takes the static COM of the path joints' posture q + v preview; ``k_zmp`` adds that share
+              of the zero-moment point's dynamic shift to the COM error; the ZMP guard (``zmp_min``, ``zmp_max``)
+              changes the ankles' lean acceleration so that the ZMP of the whole commanded motion at the end of the
+              next step stays in a band over the feet (:meth:`pathrl.baselines.com.StaticCom.zmp`)
 
 The accelerations are returned as actions of the env's free-joint mapping (``posture``: minus the env's own pull
 to the start posture, so that the env applies ``a``; ``centred``: directly). Joint axes come from the robot's URDF
@@ -22,6 +27,7 @@ the COM feedforward only: feedback on the tilt oscillated in PyBullet (the docs 
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -31,7 +37,8 @@ import torch
 from torch import Tensor
 
 from pathrl.baselines.com import StaticCom
-from pathrl.limits.feasible import acceleration_to_action
+from pathrl.limits.feasible import acceleration_to_action, action_to_acceleration
+from pathrl.limits.integrate import end_of_step
 
 
 @dataclass(frozen=True)
@@ -49,11 +56,25 @@ class BalanceCfg:
     omega: float = 3.0  # natural frequency of the legs following their corrected posture (rad/s)
     max_correction: float = 0.3  # |corrected posture| of a leg joint (rad)
     policy_legs: float = 0.0  # weight of the policy's own leg actions added to the balance law's (0: replaced)
+    # dynamic terms (docs/armar4_balance.md, section 5); all off by default, which is the static law above
+    k_zmp: float = 0.0  # share of the upper body's dynamic ZMP shift (next step) added to the static COM error
+    preview: float = 0.0  # s: the static COM of the upper body's posture this far ahead (q + v preview)
+    zmp_min: float = -math.inf  # m: lowest ZMP (relative to the ankles) the legs let the next step command
+    zmp_max: float = math.inf  # m: highest ZMP the legs let the next step command
+    ankle_height: float = 0.086  # m, ankle joints above the floor (StandingScene; the ZMP lies on the floor)
+
+    @property
+    def dynamic(self) -> bool:
+        """Whether any dynamic term is on (it needs the upper body's accelerations of the next step)."""
+        return bool(self.k_zmp or self.preview or math.isfinite(self.zmp_min) or math.isfinite(self.zmp_max))
 
     def __post_init__(self) -> None:
         for key in ("omega", "max_correction"):
             if not float(getattr(self, key)) > 0.0:
                 raise ValueError(f"controller balance: {key} must be > 0, got {getattr(self, key)}")
+        if not float(self.preview) >= 0.0 or not float(self.zmp_min) < float(self.zmp_max):
+            raise ValueError(f"controller balance: needs preview >= 0 and zmp_min < zmp_max, got {self.preview}, "
+                             f"{self.zmp_min}, {self.zmp_max}")
 
 
 def lean_vector(quat_xyzw: Tensor) -> Tensor:
@@ -181,10 +202,13 @@ class BalanceController:
         axes, links = urdf_joint_axes(robot, names)
         ankles = leg_groups(names, "ank")
         self.ankles = self.free[[i for g in ankles for i in g]]
-        self.com = StaticCom(robot, [links[g[-1]] for g in ankles]) if self.cfg.k_com else None  # feet: last ankles
+        use_com = self.cfg.k_com or self.cfg.dynamic
+        self.com = StaticCom(robot, [links[g[-1]] for g in ankles]) if use_com else None  # feet: last ankles
         self.law = BalanceLaw(self.cfg, correction_matrix(axes, ankles),
                               correction_matrix(axes, leg_groups(names, "hip")),
                               chain_matrix(axes, leg_groups(names, "_")))
+        unit = torch.tensor([[1.0, 0.0]], dtype=torch.float64)
+        self.lean_dir = (lean_rotation(unit) @ self.law.ankle.T)[0]  # (J,) ankle angles per rad forward lean
         self.upper = upper if upper is not None else _load_upper(self.cfg.policy, env)
         self.prev_tilt = torch.zeros(env.num_envs, 2, dtype=torch.float64)
 
@@ -198,17 +222,61 @@ class BalanceController:
         self.prev_tilt = tilt
         return tilt, rate
 
-    def leg_actions(self) -> Tensor:
-        """Actions (N, J) of the free joints that make the env apply the balance law's accelerations."""
-        env, f = self.env, self.free
+    def next_state(self, acc: Tensor) -> tuple[Tensor, Tensor]:
+        """Commanded positions and velocities (N, D) at the end of the next step for the accelerations `acc`
+        (N, D) at its end (the env's integration)."""
+        return end_of_step(self.env.pos, self.env.vel, self.env.acc, acc, self.env.cfg.dt)
+
+    def com_offset(self, upper_acc: Tensor | None = None) -> Tensor:
+        """Static COM (N, 3) m of the commanded posture with the ankles at 0, relative to the ankles; with
+        ``preview`` that of the path joints' posture ``preview`` s ahead (q + v preview, inside the position
+        limits), and with ``k_zmp`` the x part moved by that share of the dynamic ZMP shift (ZMP minus static COM)
+        that the upper body's accelerations `upper_acc` (N, D) give at the end of the next step, legs still."""
+        env, c = self.env, self.cfg
+        q0 = env.pos.clone()
+        q0[:, self.ankles] = 0.0
+        if c.preview > 0.0:
+            p = env.path_index
+            lim = env.limits.pos[p].to(q0)
+            q0[:, p] = torch.minimum(torch.maximum(q0[:, p] + c.preview * env.vel[:, p], lim[:, 0]), lim[:, 1])
+        off = self.com.offset(q0)
+        if c.k_zmp and upper_acc is not None:
+            f = self.free
+            q1, v1 = self.next_state(upper_acc)
+            q1[:, f], v1[:, f] = env.pos[:, f], 0.0
+            q1[:, self.ankles] = 0.0
+            a1 = upper_acc.clone()
+            a1[:, f] = 0.0
+            zmp, _ = self.com.zmp(q1, v1, a1, c.ankle_height)
+            off = off.clone()
+            off[:, 0] += c.k_zmp * (zmp[:, 0] - self.com.offset(q1)[:, 0])
+        return off
+
+    def zmp_guard(self, a_legs: Tensor, upper_acc: Tensor) -> Tensor:
+        """Leg accelerations (N, J) whose forward-lean part is changed so that the ZMP of the whole commanded motion
+        at the end of the next step stays in [zmp_min, zmp_max] (m, relative to the ankles): the ZMP is affine in
+        the ankles' lean acceleration to first order, its slope is measured with +1 rad/s^2 of forward lean."""
+        c, f = self.cfg, self.free
+        acc = upper_acc.clone()
+        acc[:, f] = a_legs
+        step = acc.clone()
+        step[:, f] += self.lean_dir
+        x0 = self.com.zmp(*self.next_state(acc), acc, c.ankle_height)[0][:, 0]
+        x1 = self.com.zmp(*self.next_state(step), step, c.ankle_height)[0][:, 0]
+        slope = x1 - x0  # m per rad/s^2, about -0.1: leaning forward faster pushes the ZMP back
+        shift = torch.where(slope < -0.01, (x0.clamp(c.zmp_min, c.zmp_max) - x0) / slope.clamp(max=-0.01), 0.0)
+        return a_legs + shift[:, None] * self.lean_dir
+
+    def leg_actions(self, upper_acc: Tensor | None = None) -> Tensor:
+        """Actions (N, J) of the free joints that make the env apply the balance law's accelerations; the dynamic
+        terms need the upper body's accelerations `upper_acc` (N, D) at the end of the next step."""
+        env, f, c = self.env, self.free, self.cfg
         tilt, rate = self.tilt()
         q, v = env.pos[:, f], env.vel[:, f]
-        ff = None
-        if self.com is not None:
-            q0 = env.pos.clone()
-            q0[:, self.ankles] = 0.0
-            ff = self.law.com_lean(self.com.offset(q0))
+        ff = self.law.com_lean(self.com_offset(upper_acc)) if self.com is not None else None
         a = self.law.acceleration(self.law.posture(tilt, rate, ff), q, v)
+        if upper_acc is not None and (math.isfinite(c.zmp_min) or math.isfinite(c.zmp_max)):
+            a = self.zmp_guard(a, upper_acc)
         lo, hi = env.a_min[:, f], env.a_max[:, f]
         act = acceleration_to_action(a, lo, hi)
         if env.cfg.free_joint_actions == "posture":  # the env adds its pull to the start posture: take it off
@@ -220,7 +288,10 @@ class BalanceController:
         with torch.no_grad():
             out = self.upper(obs).to(torch.float64).clone() if self.upper is not None else \
                 torch.zeros(self.env.num_envs, self.env.num_actions, dtype=torch.float64)
-        legs = self.leg_actions() + self.cfg.policy_legs * out[:, self.free]
+        upper_acc = None
+        if self.cfg.dynamic:  # the path joints' accelerations at the end of the next step (the env's mapping)
+            upper_acc = action_to_acceleration(out.to(self.env.a_min), self.env.a_min, self.env.a_max, self.env.hold)
+        legs = self.leg_actions(upper_acc) + self.cfg.policy_legs * out[:, self.free]
         out[:, self.free] = legs.clamp(-1.0, 1.0)
         return out.to(torch.float32)
 

@@ -71,3 +71,39 @@ class StaticCom:
         foot = pos[:, k:].mean(dim=1)
         local = (rot[:, k].transpose(1, 2) @ (com - foot)[:, :, None])[..., 0]  # in the first foot's frame
         return local @ self.foot_rot.T
+
+    def points(self, q: Tensor) -> Tensor:
+        """Centre of mass of every massive link (N, L + 1, 3) relative to the ankles' midpoint, in the axes of
+        :meth:`offset` (the base last); their mass-weighted mean is :meth:`offset`."""
+        pos, rot = self.fk.link_transforms(q.to(torch.float64), self.links + self.feet)
+        k = len(self.links)
+        pts = pos[:, :k] + (rot[:, :k] @ self.origin[:, :, None])[..., 0]
+        pts = torch.cat([pts, self.base_origin.expand(len(pts), 1, 3)], dim=1)
+        local = (pts - pos[:, k:].mean(dim=1, keepdim=True)) @ rot[:, k]  # row-wise R_foot^T (p - ankles)
+        return local @ self.foot_rot.T
+
+    def point_masses(self) -> Tensor:
+        """Masses (L + 1,) in kg in the order of :meth:`points`."""
+        return torch.cat([self.mass, torch.tensor([self.base_mass], dtype=self.mass.dtype)])
+
+    def zmp(self, q: Tensor, v: Tensor, a: Tensor, ankle_height: float, h: float = 1e-3,
+            g: float = 9.81) -> tuple[Tensor, Tensor]:
+        """Zero-moment point of the commanded motion with the feet flat and fixed on the floor.
+
+        The links are point masses at their centres of mass; their accelerations are the central second difference
+        of :meth:`points` along q(t) = q + v t + a t^2 / 2 at t = +-h (exact up to O(h^2)), so joint velocities
+        (N, D) rad/s and accelerations (N, D) rad/s^2 both count. The floor lies `ankle_height` m below the ankles.
+
+        Returns:
+            ``(zmp, com_acc)``: the ZMP (N, 2) in m (forward, left; relative to the ankles, on the floor) and the
+            acceleration of the centre of mass (N, 3) in m/s^2.
+        """
+        q, v, a = (x.to(torch.float64) for x in (q, v, a))
+        mid = q + (0.5 * h * h) * a
+        p0, pp, pm = self.points(q), self.points(mid + h * v), self.points(mid - h * v)
+        acc = (pp - 2.0 * p0 + pm) / (h * h)  # (N, P, 3)
+        m = self.point_masses()[None, :, None]
+        z = p0[..., 2:3] + ankle_height  # height above the floor
+        weight = m * (g + acc[..., 2:3])  # (N, P, 1): each point's share of the vertical force
+        moment = (weight * p0[..., :2] - m * z * acc[..., :2]).sum(dim=1)
+        return moment / weight.sum(dim=1), (m * acc).sum(dim=1) / self.total

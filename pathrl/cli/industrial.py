@@ -5,6 +5,9 @@
     pathrl-industrial sweep  [key=value ...]   baseline max error over sweep_speeds -> out_sweep
     pathrl-industrial train  [key=value ...]   TD3 + PER policy -> run_dir (resume=true continues it)
     pathrl-industrial table4 [key=value ...]   the policies of table4_runs (ablations) -> out_table4
+    pathrl-industrial record traj=ROW method=mpgd|rl [policy=RUN_DIR] out=DIR [key=value ...]
+                                               one row's optimisation, every execution -> DIR/industrial.mcap
+                                               (``pathrl-view DIR`` shows it)
 
 ``table2 policy=RUN_DIR`` adds the learned IWA (the run's newest checkpoint) beside MPGD; ``speed policy=RUN_DIR``
 uses it as the inner loop instead of MPGD. ``policy=feedback:G`` is the fixed error-feedback policy a = (G, 0, 0).
@@ -25,8 +28,10 @@ import numpy as np
 from pathrl.cli.common import UserError, compose, run_cli, to_container
 from pathrl.storage import atomic_write
 
-COMMANDS = ("table2", "speed", "sweep", "train", "table4")
-USAGE = "usage: pathrl-industrial {table2,speed,sweep,train,table4} [key=value ...]"
+COMMANDS = ("table2", "speed", "sweep", "train", "table4", "record")
+USAGE = "usage: pathrl-industrial {table2,speed,sweep,train,table4,record} [key=value ...]"
+#: keys of ``record`` only (not config keys)
+RECORD_KEYS = ("traj", "method", "out")
 
 
 def _setup(overrides: Sequence[str]):
@@ -94,6 +99,9 @@ def _main(argv: list[str]) -> None:
     cmd, rest = argv[0], argv[1:]
     if cmd not in COMMANDS:
         raise UserError(f"unknown command {cmd!r}; choose one of {', '.join(COMMANDS)}")
+    if cmd == "record":
+        _record(rest)
+        return
     from pathrl.industrial import experiments, tables
 
     cfg, (controller, mpgd, search, rl), targets = _setup(rest)
@@ -136,6 +144,54 @@ def _main(argv: list[str]) -> None:
     print(text)
     _write(out, text)
     print(f"{cmd} took {time.perf_counter() - t0:.1f} s")
+
+
+def _record_keys(argv: Sequence[str]) -> tuple[dict[str, str], list[str]]:
+    """(the ``record`` keys traj/method/out, the remaining config overrides); UserError if one is missing."""
+    own = {k: v for k, _, v in (a.partition("=") for a in argv) if k in RECORD_KEYS}
+    missing = [k for k in RECORD_KEYS if not own.get(k)]
+    if missing:
+        raise UserError(f"record: missing {', '.join(f'{k}=' for k in missing)}; usage: pathrl-industrial record "
+                        "traj=ROW method=mpgd|rl [policy=RUN_DIR] out=DIR [key=value ...]")
+    if own["method"] not in ("mpgd", "rl"):
+        raise UserError(f"record: method must be mpgd or rl, got {own['method']!r}")
+    return own, [a for a in argv if a.partition("=")[0] not in RECORD_KEYS]
+
+
+def _record(argv: Sequence[str]) -> None:
+    """``record``: one evaluation row's optimisation with every execution, written to out/industrial.mcap."""
+    import torch
+
+    from pathrl.industrial.experiments import select_targets
+    from pathrl.industrial.record import record_optimisation
+
+    own, rest = _record_keys(argv)
+    cfg, (controller, mpgd, _, rl), _ = _setup(rest)
+    try:
+        target = select_targets([own["traj"]])[0]
+    except ValueError as exc:
+        raise UserError(f"record: traj: {exc}") from None
+    run = cfg["policy"]
+    if own["method"] == "mpgd" and run:
+        raise UserError("record: policy= is for method=rl (MPGD has no policy)")
+    if own["method"] == "rl":
+        if not run:
+            raise UserError("record: method=rl needs policy=RUN_DIR (or policy=feedback:<gain>)")
+        if not run.startswith("feedback:") and not Path(run).is_dir():
+            raise UserError(f"record: policy: no such run directory: {run}")
+    torch.set_num_threads(1)
+    policy, name = _policy(run) if own["method"] == "rl" else (None, "MPGD")
+    try:
+        out, result, kept = record_optimisation(
+            target, own["method"], controller, Path(own["out"]), mpgd=mpgd, policy=policy,
+            waypoints=cfg["waypoints"], zone=cfg["zone"], rl_k_max=rl.k_max, seed=cfg["seed"],
+            meta={"policy": run, "method_name": name, "command": " ".join(["pathrl-industrial", "record", *argv])})
+    except ValueError as exc:
+        raise UserError(f"record: {exc}") from None
+    errs = [i.errors.max_pos_mm for i in kept]
+    print(f"{target.name} with {name}: max error {errs[0]:.3f} mm (baseline) -> {min(errs):.3f} mm (best), "
+          f"{len(kept)} executions, t_opt {result.t_opt:.2f} s")
+    print(f"wrote {out} ({out.stat().st_size / 1e6:.2f} MB); view with: pathrl-view {out.parent}")
 
 
 def main(argv: Sequence[str] | None = None) -> int:

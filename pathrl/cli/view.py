@@ -3,7 +3,8 @@
     pathrl-view PATH [--save OUT.rrd] [--spawn | --serve] [--episodes 0,5,17 | --worst N]
                 [--timeline time|episode]
 
-PATH is a run directory (its ``episodes.mcap`` and/or ``run.mcap``) or one of those files. Each MCAP becomes
+PATH is a run directory (its ``episodes.mcap`` and/or ``run.mcap``; ``industrial.mcap`` of ``pathrl-industrial
+record``, ``trueadapt.mcap`` of ``tools/trueadapt_record.py``) or one of those files. Each MCAP becomes
 one ``.rrd`` next to it (``episodes.rrd`` / ``run.rrd``) unless ``--save`` names the output (only when a
 single file is converted). The viewer is started only on request: ``--spawn`` (native window) or ``--serve``
 (web viewer, like ``rerun --serve-web``; blocks until Ctrl-C).
@@ -26,7 +27,7 @@ class _Parser(argparse.ArgumentParser):
 
 def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="pathrl-view", description="Convert pathrl MCAP logs into Rerun recordings (.rrd).")
-    p.add_argument("path", type=Path, help="run directory, episodes.mcap or run.mcap")
+    p.add_argument("path", type=Path, help="run directory, episodes.mcap, run.mcap, industrial.mcap or trueadapt.mcap")
     p.add_argument("--save", type=Path, metavar="OUT.rrd", help="output file (default: next to each input)")
     view = p.add_mutually_exclusive_group()
     view.add_argument("--spawn", action="store_true", help="open the native Rerun viewer on the result")
@@ -58,14 +59,14 @@ def parse_ids(text: str) -> list[int]:
 
 def inputs_of(path: Path) -> list[tuple[str, Path]]:
     """[(kind, mcap)] to convert for PATH (a run directory or an MCAP file)."""
-    from pathrl.viz.rerun_view import kind_of
+    from pathrl.viz.rerun_view import FILE_NAMES, kind_of
 
     if not path.exists():
         raise UserError(f"no such file or directory: {path}")
     if path.is_dir():
-        found = [path / n for n in ("episodes.mcap", "run.mcap") if (path / n).is_file()]
+        found = [path / n for n in FILE_NAMES if (path / n).is_file()]
         if not found:
-            raise UserError(f"{path}: no episodes.mcap or run.mcap in this directory")
+            raise UserError(f"{path}: no {', '.join(FILE_NAMES)} in this directory")
         return [(kind_of(f), f) for f in found]
     return [(kind_of(path), path)]
 
@@ -87,7 +88,7 @@ def _main(argv: list[str]) -> None:
         jobs = inputs_of(args.path)
         if args.save is not None and len(jobs) > 1:
             raise UserError(
-                f"{args.path} has both episodes.mcap and run.mcap; --save takes one input (pass the file)"
+                f"{args.path} has {' and '.join(s.name for _, s in jobs)}; --save takes one input (pass the file)"
             )
         kinds = {k for k, _ in jobs}
         if (ids is not None or args.worst is not None) and "episodes" not in kinds:
@@ -98,6 +99,12 @@ def _main(argv: list[str]) -> None:
             if kind == "episodes":
                 stats = rv.episodes_to_rrd(src, out, ids=ids, worst=args.worst, timeline=args.timeline)
                 what = f"{stats.items} episodes"
+            elif kind == "industrial":
+                stats = rv.industrial_to_rrd(src, out)
+                what = f"{stats.items} executions"
+            elif kind == "trueadapt":
+                stats = rv.trueadapt_to_rrd(src, out)
+                what = f"{stats.items} TrueAdapt episodes"
             else:
                 stats = rv.run_to_rrd(src, out)
                 what = f"{stats.items} training curves"

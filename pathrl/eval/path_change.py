@@ -10,7 +10,9 @@ velocity and acceleration; the policy sees the new path from its next decision o
 - ``replan_ms``: wall time of the switch (building the new path) plus the first decision after it;
 - the step deviation (weighted joint distance to the reference, the env's ``dev_max``) after the switch, and
   ``settle_s``: the time from the switch until it is back at the policy's normal tracking level
-  (:func:`tracking_level`, the 95th percentile on unchanged paths) after its largest excursion;
+  (:func:`tracking_level`, the 95th percentile on unchanged paths) after its largest excursion, and the settle
+  time against the control (:func:`settle_vs_control`): the same change with offset 0 (the path replaced by
+  itself), which takes the path's own turns out of the window;
 - ``duration_s``: from the switch to rest at B's end; every setpoint is checked against the position,
   velocity, acceleration and jerk limits.
 
@@ -63,6 +65,51 @@ class SwitchEpisode:
             return 0.0
         back = np.nonzero(dev[peak:] <= level)[0]
         return float((peak + back[0]) * dt) if len(back) else float("inf")
+
+
+def _control_bound(dev: np.ndarray, control: np.ndarray, level: float, dt: float, window_s: float,
+                   slack_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """`dev` over the first `window_s` seconds and, per step, the larger of `level` and the control's largest
+    deviation within `slack_s` either side (the two runs drift apart by a step or two; past its end the control
+    counts as 0)."""
+    n = max(1, int(round(window_s / dt)))
+    w = int(round(slack_s / dt))
+    d = np.asarray(dev, dtype=float)[:n]
+    c = np.zeros(n + 2 * w)
+    c0 = np.asarray(control, dtype=float)[: n + w]
+    c[w: w + len(c0)] = c0
+    envelope = np.lib.stride_tricks.sliding_window_view(c, 2 * w + 1).max(axis=1)[: len(d)]
+    return d, np.maximum(level, envelope)
+
+
+def settle_vs_control(dev: np.ndarray, control: np.ndarray, level: float, dt: float, window_s: float = 4.0,
+                      slack_s: float = 0.2) -> float:
+    """Time (s) from the switch until the step deviation `dev` (T,) stays, for the rest of the first `window_s`
+    seconds, at or below the larger of `level` and the deviation `control` (T0,) of the same episode with the path
+    replaced by itself (variant ``none``: same path, same switch time, same policy), taken as the control's largest
+    value within `slack_s` either side. 0 if `dev` never exceeds it: the change's own effect, with the path's turns
+    (present in both runs) taken out."""
+    d, bound = _control_bound(dev, control, level, dt, window_s, slack_s)
+    above = np.nonzero(d > bound)[0]
+    return float((above[-1] + 1) * dt) if len(above) else 0.0
+
+
+def excess_vs_control(dev: np.ndarray, control: np.ndarray, level: float, dt: float, from_s: float = 2.0,
+                      window_s: float = 4.0, slack_s: float = 0.2) -> float:
+    """How far (rad) the step deviation exceeds the bound of :func:`settle_vs_control` at worst between `from_s` and
+    `window_s` seconds after the switch (0 if it never does): the size of what is left of the change's effect."""
+    d, bound = _control_bound(dev, control, level, dt, window_s, slack_s)
+    k = int(round(from_s / dt))
+    return float(max(0.0, np.max(d[k:] - bound[k:]))) if len(d) > k else 0.0
+
+
+def paired_settle(episodes: list[SwitchEpisode], control: list[SwitchEpisode], level: float,
+                  dt: float) -> tuple[list[float], list[float]]:
+    """:func:`settle_vs_control` and :func:`excess_vs_control` of each change against the same change with offset 0
+    (lists in the same order)."""
+    pairs = [(np.asarray(e.dev_after), np.asarray(c.dev_after)) for e, c in zip(episodes, control, strict=True)]
+    return ([settle_vs_control(d, c, level, dt) for d, c in pairs],
+            [excess_vs_control(d, c, level, dt) for d, c in pairs])
 
 
 def branch(knots: np.ndarray, s_now: float, q_now: np.ndarray, v_now: np.ndarray, offset: np.ndarray, ramp: float,
@@ -203,9 +250,20 @@ def _finite(x: float) -> float | None:
     return float(x) if np.isfinite(x) else None
 
 
-def summarize(episodes: list[SwitchEpisode], replans: list[dict], level: float, dt: float) -> dict:
-    """Aggregate of :func:`path_change_episodes` and :func:`toppra_replan` on the same changes."""
+def summarize(episodes: list[SwitchEpisode], replans: list[dict], level: float, dt: float,
+              control: list[SwitchEpisode] | None = None) -> dict:
+    """Aggregate of :func:`path_change_episodes` and :func:`toppra_replan` on the same changes; with `control` (the
+    same changes with offset 0) also the settle time against it (:func:`settle_vs_control`)."""
     settle = np.array([e.settle_s(level, dt) for e in episodes])
+    paired = {}
+    if control is not None:
+        vs, excess = (np.array(x) for x in paired_settle(episodes, control, level, dt))
+        paired = {"settled_vs_control_within_2s_pct": float(100 * np.mean(vs <= 2.0)),
+                  "settle_vs_control_s_median": float(np.median(vs)),
+                  "settle_vs_control_s_p95": float(np.quantile(vs, 0.95)),
+                  "settle_vs_control_s_hist": {f"<={b:g}": int(np.sum(vs <= b)) for b in (0.0, 0.5, 1.0, 2.0, 4.0)},
+                  "excess_after_2s_rad_median": float(np.median(excess)),
+                  "excess_after_2s_rad_p95": float(np.quantile(excess, 0.95))}
     peak = np.array([max(e.dev_after) for e in episodes])
     learned = np.array([e.duration_s for e in episodes])
     ok = [r for r in replans if r["status"] != "infeasible"]
@@ -225,7 +283,7 @@ def summarize(episodes: list[SwitchEpisode], replans: list[dict], level: float, 
         "toppra_violations": int(sum(r["violations"] for r in ok)),
         "toppra_from_motion_feasible_pct": float(100 * np.mean([r["from_motion_feasible"] for r in replans])),
         "toppra_normal_speed_median": float(np.median([r["normal_speed"] for r in replans])),
-        "learned_over_toppra": _finite(learned.mean() / topp.mean()) if len(topp) else None,
+        "learned_over_toppra": _finite(learned.mean() / topp.mean()) if len(topp) else None, **paired,
     }
 
 
@@ -250,11 +308,17 @@ def main(argv: list[str] | None = None) -> None:
     dt = follower.env_cfg.dt
     res: dict = {"model": args.model, "dataset": args.dataset, "seed": args.seed, "switch_range_s": SWITCH_RANGE,
                  "variants": {}}
-    for name, (offset, ramp) in VARIANTS.items():
+    control = None
+    for name, (offset, ramp) in VARIANTS.items():  # "none" first: the control of the others
         episodes = path_change_episodes(follower, knots, args.episodes, args.seed, offset_rad=offset, ramp_rad=ramp)
         replans = toppra_replan(follower, knots, args.episodes, args.seed, offset_rad=offset, ramp_rad=ramp)
-        res["variants"][name] = {"offset_rad": offset, "ramp_rad": ramp, **summarize(episodes, replans, level, dt),
+        res["variants"][name] = {"offset_rad": offset, "ramp_rad": ramp,
+                                 **summarize(episodes, replans, level, dt, control),
                                  "settle_s": [_finite(e.settle_s(level, dt)) for e in episodes]}
+        if control is not None:
+            vs, excess = paired_settle(episodes, control, level, dt)
+            res["variants"][name].update(settle_vs_control_s=vs, excess_after_2s_rad=excess)
+        control = episodes if offset == 0.0 else control
     write_json_atomic(args.out, res)
 
 

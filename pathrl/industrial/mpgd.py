@@ -20,6 +20,7 @@ maximum error meets the spec (0.5 mm) or after ``k_max`` iterations (paper: 50) 
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -115,9 +116,11 @@ def mpgd_update(program: Program, ex: Execution, target: Target, psi: np.ndarray
 
 
 def run_mpgd(target: Target, program: Program, v: float, params: MPGDParams | None = None,
-             controller: ControllerParams | None = None, seed: int = 0) -> IWAResult:
+             controller: ControllerParams | None = None, seed: int = 0,
+             on_execution: Callable[[int, Program, Execution], None] | None = None) -> IWAResult:
     """IWA with MPGD from `program` at speed command `v` mm/s; stops at the 0.5 mm spec or after k_max
-    adjustments (k_max + 1 executions at most)."""
+    adjustments (k_max + 1 executions at most). `on_execution(k, program, execution)` sees every execution (a
+    recorder; it runs inside the timed loop)."""
     params = MPGDParams() if params is None else params
     controller = ControllerParams() if controller is None else controller
     psi = waypoint_indices(len(target.p), len(program.positions))
@@ -126,6 +129,8 @@ def run_mpgd(target: Target, program: Program, v: float, params: MPGDParams | No
     history: list[float] = []
     for k in range(params.k_max + 1):
         ex = execute(program, v, controller, seed=seed + k)
+        if on_execution is not None:
+            on_execution(k, program, ex)
         errs = evaluate(ex.p, ex.rot, 1.0 / controller.rate, target.p, target.z_axis)
         history.append(errs.max_pos_mm)
         if best is None or errs.max_pos_mm < best.errors.max_pos_mm:

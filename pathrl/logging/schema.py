@@ -49,3 +49,36 @@ JOINT_STATE_SCHEMA_NAME = "pathrl.JointState"
 JOINT_STATE_SCHEMA = {"type": "object", "properties": {"episode": {"type": "integer"}, "t": {"type": "number"},
                       "position": {"type": "array"}, "velocity": {"type": "array"},
                       "acceleration": {"type": "array"}}}
+
+# ``industrial.mcap`` (one waypoint optimisation of issue 21: :mod:`pathrl.industrial.record`); positions in mm,
+# log time = iteration k seconds:
+#
+# * INDUSTRIAL_TARGET once: name, pose, move, speed_mm_s, method, policy, positions (n, 3), z_axis (n, 3);
+# * per iteration k (0 = the baseline profile): INDUSTRIAL_WAYPOINTS (iteration, positions (m, 3)),
+#   INDUSTRIAL_EXECUTED (iteration, t (N,) s, positions (N, 3)) and INDUSTRIAL_ERROR (iteration, max_pos_mm,
+#   mean_pos_mm, max_ori_deg, mean_speed, speed_std, speed_std_ratio, profile_mm (N,) per executed sample,
+#   target_index (N,) fractional index of each sample's nearest target point);
+# * INDUSTRIAL_SUMMARY once: method, iterations, best_iteration, iterations_to_spec, executions, t_opt_s, history.
+INDUSTRIAL_TARGET = "/industrial/target"
+INDUSTRIAL_WAYPOINTS = "/industrial/waypoints"
+INDUSTRIAL_EXECUTED = "/industrial/executed"
+INDUSTRIAL_ERROR = "/industrial/error"
+INDUSTRIAL_SUMMARY = "/industrial/summary"
+#: the channels an industrial.mcap must have
+INDUSTRIAL_TOPICS = (INDUSTRIAL_TARGET, INDUSTRIAL_EXECUTED)
+
+# ``trueadapt.mcap`` (TrueAdapt adaptation episodes of issue 20: :mod:`pathrl.eval.trueadapt_record`), positions
+# in m and rad, log time = the episode's time on a back-to-back clock:
+#
+# * TRUEADAPT_ROBOT once: the EVAL_ROBOT layout plus mode, dt, plate_size (3,);
+# * TRUEADAPT_STEP per episode and decision step (step 0 = the initial state): episode, step, t (s),
+#   reference (D,), position / velocity / acceleration (D,) commanded (adapted), reference_tcp (3,), tcp (3,),
+#   plate_quat_xyzw (4,) of the adapted plate, ball_xy (2,) in the plate frame, ball_position (3,) in the world,
+#   ball_radius, failed (sticky: the task has failed), deviation (max |q - q_ref|, rad);
+# * TRUEADAPT_EPISODE when an episode ends: episode, trajectory (bank index), steps, success, failed,
+#   dev_terminated, fraction, acc, jerk, offset (the metrics of :mod:`pathrl.eval.trueadapt`).
+TRUEADAPT_ROBOT = "/trueadapt/robot"
+TRUEADAPT_STEP = "/trueadapt/step"
+TRUEADAPT_EPISODE = "/trueadapt/episode"
+#: the channels a trueadapt.mcap must have
+TRUEADAPT_TOPICS = (TRUEADAPT_ROBOT, TRUEADAPT_STEP)

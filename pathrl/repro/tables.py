@@ -131,7 +131,10 @@ TABLE_I_ROWS: tuple[Row, ...] = (
     # Tables II-IV keep iiwa7_random, whose rows share one budget
     Row(TABLE_I, "iiwa7/random", _e("iiwa7_random_continue", "iiwa7", "random")),
     Row(TABLE_I, "iiwa7/target_point", _e("iiwa7_target_point", "iiwa7", "target_point")),
-    Row(TABLE_I, "iiwa7/ball_balancing", _e("iiwa7_ball_balancing", "iiwa7", "ball_balancing", "distance_5", "full")),
+    # trained with the path length weighted 1 (conf/experiment/iiwa7_ball_balancing_length_lt.yaml); Table VII's rows
+    # keep iiwa7_ball_balancing (weight 4), their warm starts
+    Row(TABLE_I, "iiwa7/ball_balancing", _e("iiwa7_ball_balancing_length_lt", "iiwa7", "ball_balancing", "distance_5",
+                                            "full")),
     # trained on from armar6_random at a lower path-length weight (conf/experiment/armar6_random_continue.yaml)
     Row(TABLE_I, "armar6/random", _e("armar6_random_continue", "armar6", "random")),
     Row(TABLE_I, "armar4_fixed/random", ARMAR4_RANDOM),
@@ -189,6 +192,9 @@ ROWS: tuple[Row, ...] = (
     # not in the paper: that policy's upper body with a model-based leg balance law (pathrl.baselines.balance)
     Row(TABLE_VIII, "controlled_legs/balance_controller", _e("armar4_legs_balance_controller", "armar4_legs",
                                                              "target_point", task="standing", episodes=200)),
+    # the same law with a guard on the zero-moment point of the commanded next step and a 0.3 s preview
+    Row(TABLE_VIII, "controlled_legs/balance_dynamic", _e("armar4_legs_balance_dynamic", "armar4_legs",
+                                                          "target_point", task="standing", episodes=200)),
 )
 
 
@@ -203,10 +209,12 @@ NOT_IN_PAPER = frozenset({(TABLE_VII, "balancing_reward/open_loop"), (TABLE_VII,
                           (TABLE_VII, "model_based_feedback_path_law/open_loop"), (TABLE_VII, "distilled_path_law"),
                           (TABLE_VII, "distilled_path_law_ppo"), (TABLE_VII, "distilled_path_law_ppo/open_loop"),
                           (TABLE_VII, "residual_path_law_ppo"), (TABLE_VII, "residual_path_law_ppo/open_loop"),
-                          (TABLE_VIII, "controlled_legs/balance_controller")})
+                          (TABLE_VIII, "controlled_legs/balance_controller"),
+                          (TABLE_VIII, "controlled_legs/balance_dynamic")})
 
 #: Model directories that hold a model-based controller (``controller:`` in config.yaml): evaluated, not trained.
 CONTROLLER_MODELS = frozenset({"iiwa7_ball_tray_controller", "iiwa7_ball_tray_law", "armar4_legs_balance_controller",
+                               "armar4_legs_balance_dynamic",
                                *(greedy_model(r.evaluation) for r in TABLE_I_ROWS)})
 
 
@@ -237,7 +245,8 @@ def warm_chain(model: str) -> list[str]:
 #: The authors' budget per policy: (million env steps, wall time in hours), from their checkpoints' training
 #: metadata (iterations x train batch; Ray RLlib on a cluster node).
 AUTHORS_BUDGETS = {"iiwa7_random": (195, 45.2), "iiwa7_target_point": (300, 65.3),
-                   "iiwa7_ball_balancing": (150, 30.8), "iiwa7_ball_balancing_reward": (629, 122.5),
+                   "iiwa7_ball_balancing": (150, 30.8), "iiwa7_ball_balancing_length_lt": (150, 30.8),
+                   "iiwa7_ball_balancing_reward": (629, 122.5),
                    "armar6_random": (619, 238.4), "armar4_random": (137, 137.0), "armar4_target_point": (110, 93.8),
                    "armar4_target_point_balancing": (156, 176.8), "armar4_legs_target_point_balancing": (169, 229.9)}
 

@@ -1,0 +1,108 @@
+"""Record TrueAdapt adaptation episodes to DIR/trueadapt.mcap for ``pathrl-view DIR`` (reference vs adapted
+trajectory, the ball on the plate).
+
+    .venv/bin/python tools/trueadapt_record.py --controller reference --episodes 3 --out runs/trueadapt_view
+    .venv/bin/python tools/trueadapt_record.py --run runs/iiwa7_trueadapt_on_plate/seed0 --out runs/trueadapt_view
+    .venv/bin/python tools/trueadapt_record.py --controller reference --keep-going --task in_place --out DIR
+
+The run (or the ``--task`` experiment's config without ``--run``), the env and the actor are loaded as
+tools/trueadapt_eval.py loads them: a run's checkpoint (or the controller of its config.yaml), or ``--controller``
+(a name such as ``reference`` or a YAML mapping ``{name: ..., <keys>}``). Trajectories 0 .. episodes-1 of the split,
+deterministic actions, the analytic ball unless ``--backend pybullet``; ``--keep-going`` lets an episode run to the
+end of its trajectory after the task failed (the joint-deviation termination stays).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import torch
+
+from pathrl.cli.common import compose, to_container
+from pathrl.config.schema import TrainAppCfg
+from pathrl.envs.trueadapt import build_trueadapt_env
+from pathrl.eval.trueadapt_record import FILE_NAME, record_trueadapt
+
+
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    src = ap.add_mutually_exclusive_group(required=True)
+    src.add_argument("--run", type=Path, default=None, help="a run or model directory (its checkpoint or controller)")
+    src.add_argument("--controller", default=None, help="a controller name (e.g. reference) or YAML mapping")
+    ap.add_argument("--task", choices=["on_plate", "in_place"], default="on_plate", help="without --run")
+    ap.add_argument("--out", type=Path, required=True, help="output directory (gets trueadapt.mcap)")
+    ap.add_argument("--episodes", type=int, default=3)
+    ap.add_argument("--dataset", default=None, help="dataset directory (default: the config's)")
+    ap.add_argument("--split", default="test")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--backend", choices=["analytic", "pybullet"], default="analytic", help="ball simulation")
+    ap.add_argument("--checkpoint", type=Path, default=None, help="with --run: this checkpoint, not the latest")
+    ap.add_argument("--keep-going", action="store_true",
+                    help="do not end an episode when the task fails (to see the whole trajectory)")
+    return ap.parse_args(argv)
+
+
+def controller_spec(text: str) -> dict:
+    """``reference`` -> {"name": "reference"}; a YAML mapping as it is."""
+    import yaml
+
+    spec = yaml.safe_load(text)
+    spec = {"name": spec} if isinstance(spec, str) else spec
+    if not isinstance(spec, dict):
+        raise ValueError(f"--controller: expected a name or a YAML mapping, got {text!r}")
+    return spec
+
+
+def load(args: argparse.Namespace):
+    """(env, actor): the config, env and actor as tools/trueadapt_eval.py builds them."""
+    ckpt = None
+    if args.run is None:
+        cfg = to_container(compose("train", [f"+experiment=iiwa7_trueadapt_{args.task}"], TrainAppCfg))
+    else:
+        from pathrl.eval.evaluate import load_run
+
+        cfg, ckpt, _ = load_run(args.run)
+        ckpt = args.checkpoint or ckpt
+    spec = controller_spec(args.controller) if args.controller is not None else cfg.get("controller")
+    cfg["task"]["backend"] = args.backend
+    env = build_trueadapt_env(cfg, args.split, args.episodes, args.dataset, args.seed, autoreset=False,
+                              **({"fail_terminates": False} if args.keep_going else {}))
+    try:
+        if spec is not None:
+            from pathrl.baselines.controllers import make_controller
+
+            return env, make_controller(spec, env)
+        from pathrl.eval.evaluate import load_policy
+
+        return env, load_policy(cfg, env, ckpt)
+    except BaseException:
+        env.close()
+        raise
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
+    if args.episodes < 1:
+        print(f"error: --episodes must be >= 1, got {args.episodes}", file=sys.stderr)
+        return 2
+    torch.set_num_threads(1)
+    try:
+        env, actor = load(args)
+    except (ValueError, OSError) as exc:  # RunError, DatasetError, a bad controller or config
+        print(f"error: {str(exc).splitlines()[0]}", file=sys.stderr)
+        return 2
+    try:
+        out = args.out / FILE_NAME
+        stats = record_trueadapt(env, actor, args.episodes, out)
+    finally:
+        env.close()
+    print(json.dumps(stats))
+    print(f"wrote {out} ({out.stat().st_size / 1e6:.2f} MB); view with: pathrl-view {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
