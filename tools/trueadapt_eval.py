@@ -3,6 +3,9 @@
     .venv/bin/python tools/trueadapt_eval.py --task on_plate --episodes 1000            # reference, no adaptation
     .venv/bin/python tools/trueadapt_eval.py --run runs/iiwa7_trueadapt_on_plate/seed0 [--open-loop]
     .venv/bin/python tools/trueadapt_eval.py --task in_place --backend pybullet         # the ball in PyBullet
+    .venv/bin/python tools/trueadapt_eval.py --controller '{name: trueadapt_tray, kp: 2.25}'  # a controller
+    .venv/bin/python tools/trueadapt_eval.py --run models/iiwa7_trueadapt_on_plate_tray  # config.yaml: controller:
+    .venv/bin/python tools/trueadapt_eval.py --run runs/<run> --checkpoint runs/<run>/model_100.pt
 
 Trajectories 0 .. episodes-1 of the split (cycled), ``--num-envs`` at a time, deterministic policy actions. Prints
 the success rate, the trajectory fraction executed before the task failed, the mean normalised |a| and |jerk| and
@@ -34,6 +37,9 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--open-loop", action="store_true", help="the ball measurement stays at its initial value")
     ap.add_argument("--backend", choices=["analytic", "pybullet"], default="analytic", help="ball simulation")
+    ap.add_argument("--controller", default=None, help="a controller spec (YAML mapping, e.g. "
+                    "'{name: trueadapt_tray}') to evaluate on the --task experiment's config")
+    ap.add_argument("--checkpoint", type=Path, default=None, help="with --run: this checkpoint, not the latest")
     args = ap.parse_args()
     torch.set_num_threads(1)
     if args.run is None:
@@ -42,11 +48,28 @@ def main() -> None:
         from pathrl.eval.evaluate import load_run
 
         cfg, ckpt, _ = load_run(args.run)
+        ckpt = args.checkpoint or ckpt
+    spec = cfg.get("controller")
+    if args.controller is not None:
+        import yaml
+
+        spec = yaml.safe_load(args.controller)
     cfg["task"]["backend"] = args.backend
     env = build_trueadapt_env(cfg, args.split, min(args.num_envs, args.episodes), args.dataset, args.seed,
                               autoreset=False, **({"obs_ball": False} if args.open_loop else {}))
     policy = reference_policy
-    if args.run is not None:
+    if spec is not None:
+        from pathrl.baselines.controllers import make_controller
+
+        try:
+            controller = make_controller(spec, env)
+        except ValueError as exc:
+            env.close()
+            raise SystemExit(f"error: {exc}") from None
+
+        def policy(e):
+            return controller(e.get_observations())
+    elif args.run is not None:
         from pathrl.eval.evaluate import load_policy
 
         model = load_policy(cfg, env, ckpt)

@@ -11,6 +11,7 @@ from torch import Tensor
 from pathrl.baselines.balance import BalanceCfg, BalanceController
 from pathrl.baselines.ball_feedback import TrayController, TrayControllerCfg
 from pathrl.baselines.greedy_follower import GreedyCfg, GreedyFollower
+from pathrl.baselines.trueadapt_tray import AdaptTrayCfg, AdaptTrayController
 from pathrl.envs.tracking import PathTrackingEnv
 
 
@@ -33,7 +34,8 @@ class ReferenceReplay:
 
 
 CONTROLLERS = {"tray": (TrayController, TrayControllerCfg), "greedy": (GreedyFollower, GreedyCfg),
-               "reference": (ReferenceReplay, ReferenceReplayCfg), "balance": (BalanceController, BalanceCfg)}
+               "reference": (ReferenceReplay, ReferenceReplayCfg), "balance": (BalanceController, BalanceCfg),
+               "trueadapt_tray": (AdaptTrayController, AdaptTrayCfg)}
 
 
 def make_controller(spec: dict, env: PathTrackingEnv) -> TrayController | GreedyFollower | ReferenceReplay:

@@ -4,6 +4,8 @@ Paper metrics (TrueAdapt Sec. VIII, Table I), per trajectory: success (on plate:
 border; in place: never more than ``max_ball_offset`` from its start; and no joint deviated beyond the
 termination threshold), the fraction of the trajectory executed before the task failed, the mean normalised
 |acceleration| and |jerk| over joints and steps, and the mean distance of the ball from its start (error distance).
+For diagnosis also why a trajectory failed: ``lost`` (the task failed: ball at the border / too far from its start /
+off the plate) and ``deviation_end`` (the episode was cut by the joint deviation termination).
 """
 
 from __future__ import annotations
@@ -32,7 +34,8 @@ def evaluate(env: TrueAdaptEnv, policy: Policy, trajectories: Tensor) -> dict[st
     if env.cfg.autoreset:
         raise ValueError("evaluate: build the env with autoreset=False")
     keys = ("success", "fraction", "acc", "jerk", "offset")
-    out = {k: torch.zeros(len(trajectories), dtype=torch.float64) for k in keys}
+    flags = {"lost": "failed", "deviation_end": "dev_terminated"}
+    out = {k: torch.zeros(len(trajectories), dtype=torch.float64) for k in (*keys, *flags)}
     n = env.num_envs
     for lo in range(0, len(trajectories), n):
         batch = trajectories[lo:lo + n]
@@ -48,6 +51,8 @@ def evaluate(env: TrueAdaptEnv, policy: Policy, trajectories: Tensor) -> dict[st
                 m = env.episode_metrics(done)
                 at = lo + done.nonzero().squeeze(1).cpu()
                 out["success"][at] = env.last_step["success"][done].double().cpu()
+                for k, name in flags.items():
+                    out[k][at] = env.last_step[name][done].double().cpu()
                 for k in keys[1:]:
                     out[k][at] = m[k].cpu()
                 pending &= ~done
