@@ -10,7 +10,7 @@ import pytest
 from hydra import compose, initialize_config_dir
 
 from pathrl.cli.common import CONF_DIR
-from pathrl.config.store import register
+from pathrl.cli.store import register
 
 EXPERIMENTS = sorted(p.stem for p in (CONF_DIR / "experiment").glob("*.yaml"))
 SWEEPS = sorted(p.stem for p in (CONF_DIR / "sweep").glob("*.yaml"))

@@ -23,7 +23,7 @@ def compose(config_name: str, overrides: Sequence[str], schema: type | None = No
     from hydra.errors import HydraException
     from omegaconf.errors import OmegaConfBaseException
 
-    from pathrl.config.store import register
+    from pathrl.cli.store import register
 
     register()
     try:

@@ -18,8 +18,8 @@ from hydra.types import RunMode
 from omegaconf import DictConfig, OmegaConf
 
 from pathrl.cli import sweep_report
+from pathrl.cli.store import register
 from pathrl.config.paths import CONF_DIR
-from pathrl.config.store import register
 
 register()
 
