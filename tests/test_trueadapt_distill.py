@@ -1,0 +1,55 @@
+"""TrueAdapt distilled (conf/experiment/iiwa7_trueadapt_*_distill.yaml): a tiny DAgger run with the tray controller as
+teacher lowers the behaviour loss, and its checkpoint acts on the policy observation alone."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+import torch
+from test_trueadapt import tiny_trueadapt  # noqa: F401  (the fixture: a 4 + 4 trajectory set)
+
+from pathrl.cli.common import compose, to_container
+from pathrl.config.schema import TrainAppCfg
+from pathrl.logging.mcap_io import read_messages
+
+
+def _cfg(experiment: str, dataset: Path, run_dir: Path, iterations: int) -> dict:
+    return to_container(compose("train", [f"+experiment={experiment}", f"dataset.path={dataset}",
+                                          f"iterations={iterations}", "env.num_envs=16", f"run_dir={run_dir}",
+                                          "compile_limits=false", "threads=1"], TrainAppCfg))
+
+
+@pytest.mark.parametrize("task", ["on_plate", "in_place"])
+def test_distillation_configs_compose_with_the_tray_teacher(task, tiny_trueadapt):  # noqa: F811
+    cfg = _cfg(f"iiwa7_trueadapt_{task}_distill", tiny_trueadapt.path, Path("unused"), 1)
+    assert cfg["agent"]["algorithm"]["class_name"] == "Distillation"
+    assert cfg["teacher"] == {"name": "trueadapt_tray"} and cfg["task"]["adapt"]["mode"] == task
+    assert cfg["agent"]["obs_groups"]["student"] == ["policy"]  # the student sees the policy observation only
+
+
+def test_tiny_distillation_lowers_the_loss_and_the_student_acts_on_the_policy_observation(tiny_trueadapt,  # noqa: F811
+                                                                                           tmp_path):
+    from pathrl.envs.trueadapt import build_trueadapt_env
+    from pathrl.eval.evaluate import load_policy, load_run
+    from pathrl.eval.trueadapt import evaluate
+    from pathrl.train.runner import train
+
+    run_dir = tmp_path / "distill"
+    summary = train(_cfg("iiwa7_trueadapt_on_plate_distill", tiny_trueadapt.path, run_dir, 6), run_dir)
+    assert summary["iterations"] == 6
+    loss = [m["values"]["Loss/behavior"] for t, _, m in read_messages(run_dir / "run.mcap") if t == "/train/scalars"]
+    assert len(loss) == 6 and loss[-1] < 0.5 * loss[0], loss  # the untrained student is far from the controller
+
+    cfg, ckpt, _ = load_run(run_dir)
+    assert ckpt is not None and ckpt.name == "model_5.pt"
+    env = build_trueadapt_env(cfg, "test", num_envs=4, autoreset=False)
+    assert set(env.get_observations().keys()) == {"policy"}  # no teacher group, no controller: the policy's own view
+    model = load_policy(cfg, env, ckpt)
+    first = next(m for m in model.modules() if isinstance(m, torch.nn.Linear))
+    assert first.in_features == env.num_obs
+    with torch.no_grad():
+        a = model(env.get_observations())
+    assert a.shape == (4, env.num_actions) and bool(torch.isfinite(a).all()) and float(a.abs().max()) > 0.0
+    m = evaluate(env, lambda e: model(e.get_observations()), torch.arange(4))
+    assert bool(((m["fraction"] >= 0) & (m["fraction"] <= 1)).all()) and bool((m["acc"] > 0).all())
