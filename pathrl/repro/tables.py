@@ -138,7 +138,8 @@ TABLE_I_ROWS: tuple[Row, ...] = (
     # trained on from armar6_random at a lower path-length weight (conf/experiment/armar6_random_continue.yaml)
     Row(TABLE_I, "armar6/random", _e("armar6_random_continue", "armar6", "random")),
     Row(TABLE_I, "armar4_fixed/random", ARMAR4_RANDOM),
-    Row(TABLE_I, "armar4_fixed/target_point", _e("armar4_target_point", "armar4", "target_point")),
+    # trained on from armar4_target_point at low action noise (conf/experiment/armar4_target_point_continue.yaml)
+    Row(TABLE_I, "armar4_fixed/target_point", _e("armar4_target_point_continue", "armar4", "target_point")),
 )
 
 #: Table I rows without a second test split (the ball-balancing paths have none yet).
@@ -228,7 +229,8 @@ WARM_STARTS = {"iiwa7_ball_balancing_reward": "iiwa7_ball_balancing",
                "armar4_target_point_balancing": "armar4_target_point",
                "armar4_legs_target_point_balancing": "armar4_target_point",
                "iiwa7_random_continue": "iiwa7_random",
-               "armar6_random_continue": "armar6_random"}
+               "armar6_random_continue": "armar6_random",
+               "armar4_target_point_continue": "armar4_target_point"}
 
 
 def warm_chain(model: str) -> list[str]:
