@@ -1,4 +1,5 @@
-"""Shared fixtures: one torch thread (the suite's workloads are small), a tiny synthetic iiwa7 dataset."""
+"""Shared fixtures: one torch thread (the suite's workloads are small), a tiny synthetic iiwa7 dataset, a tiny
+TrueAdapt trajectory set."""
 
 import os
 
@@ -15,3 +16,19 @@ torch.set_num_threads(1)
 @pytest.fixture(scope="session")
 def tiny_dataset(tmp_path_factory):
     return write_synthetic(tmp_path_factory.mktemp("data") / "iiwa7_tiny")
+
+
+@pytest.fixture(scope="session")
+def tiny_trueadapt(tmp_path_factory):
+    """A generated TrueAdapt on-plate set of one drawn trajectory per split (4 stored each, mirrored)."""
+    from omegaconf import OmegaConf
+
+    from pathrl.config.paths import CONF_DIR
+    from pathrl.dataset.generate import generate_dataset
+
+    robot = OmegaConf.to_container(OmegaConf.load(CONF_DIR / "robot" / "iiwa7.yaml"), resolve=True)
+    ds = OmegaConf.load(CONF_DIR / "dataset" / "trueadapt_on_plate.yaml")
+    ds.num_train, ds.num_test = 1, 1
+    dest = tmp_path_factory.mktemp("ta") / "tiny"
+    return generate_dataset(robot, OmegaConf.to_container(ds, resolve=False), dest=str(dest), workers=1,
+                            progress=False)

@@ -81,6 +81,8 @@ def program_of(argv: tuple[str, ...]) -> tuple[str, list[str]]:
     args = list(argv)
     while args and (re.fullmatch(r"[A-Z_][A-Z0-9_]*=\S*", args[0]) or args[0] == "time"):
         args.pop(0)
+    if not args:  # a line of shell assignments only (RUN=...): the command using it cannot be checked
+        raise ValueError(f"{' '.join(argv)!r}: a docs command sets shell variables; write the values in")
     prog = args[0]
     if prog.startswith(".venv/bin/"):
         prog = prog[len(".venv/bin/"):]

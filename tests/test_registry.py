@@ -8,7 +8,6 @@ from pathlib import Path
 import pytest
 import torch
 import yaml
-from omegaconf import OmegaConf
 
 from pathrl.cli.common import CONF_DIR, compose, to_container
 from pathrl.config.schema import TrainAppCfg
@@ -26,16 +25,9 @@ STEPS = 3
 
 
 @pytest.fixture(scope="module")
-def tiny_trajectories(tmp_path_factory) -> str:
-    """A TrueAdapt trajectory set of one drawn trajectory per split (4 stored, mirrored)."""
-    from pathrl.dataset.generate import generate_dataset
-
-    robot = OmegaConf.to_container(OmegaConf.load(CONF_DIR / "robot" / "iiwa7.yaml"), resolve=True)
-    ds = OmegaConf.load(CONF_DIR / "dataset" / "trueadapt_on_plate.yaml")
-    ds.num_train, ds.num_test = 1, 1
-    dest = tmp_path_factory.mktemp("ta") / "tiny"
-    generate_dataset(robot, OmegaConf.to_container(ds, resolve=False), dest=str(dest), workers=1, progress=False)
-    return str(dest)
+def tiny_trajectories(tiny_trueadapt) -> str:
+    """The shared tiny TrueAdapt trajectory set (conftest) as a dataset path."""
+    return str(tiny_trueadapt.path)
 
 
 def _cfg(overrides: list[str]) -> dict:

@@ -261,18 +261,6 @@ def test_a_traced_trajectory_is_continuous_and_within_the_limits():
 
 
 # ------------------------------------------------------------------------------------------------ generator
-@pytest.fixture(scope="module")
-def tiny_trueadapt(tmp_path_factory):
-    from pathrl.dataset.generate import generate_dataset
-
-    robot = OmegaConf.to_container(OmegaConf.load(CONF_DIR / "robot" / "iiwa7.yaml"), resolve=True)
-    ds = OmegaConf.load(CONF_DIR / "dataset" / "trueadapt_on_plate.yaml")
-    ds.num_train, ds.num_test = 1, 1
-    dest = tmp_path_factory.mktemp("ta") / "tiny"
-    return generate_dataset(robot, OmegaConf.to_container(ds, resolve=False), dest=str(dest), workers=1,
-                            progress=False)
-
-
 def test_generator_tiny(tiny_trueadapt):
     from pathrl.robot.kinematics import ForwardKinematics
 

@@ -7,7 +7,6 @@ from pathlib import Path
 
 import pytest
 import torch
-from test_trueadapt import tiny_trueadapt  # noqa: F401  (the fixture: a 4 + 4 trajectory set)
 
 from pathrl.cli.common import compose, to_container
 from pathrl.config.schema import TrainAppCfg
@@ -21,14 +20,14 @@ def _cfg(experiment: str, dataset: Path, run_dir: Path, iterations: int) -> dict
 
 
 @pytest.mark.parametrize("task", ["on_plate", "in_place"])
-def test_distillation_configs_compose_with_the_tray_teacher(task, tiny_trueadapt):  # noqa: F811
+def test_distillation_configs_compose_with_the_tray_teacher(task, tiny_trueadapt):
     cfg = _cfg(f"iiwa7_trueadapt_{task}_distill", tiny_trueadapt.path, Path("unused"), 1)
     assert cfg["agent"]["algorithm"]["class_name"] == "Distillation"
     assert cfg["teacher"] == {"name": "trueadapt_tray"} and cfg["task"]["adapt"]["mode"] == task
     assert cfg["agent"]["obs_groups"]["student"] == ["policy"]  # the student sees the policy observation only
 
 
-def test_tiny_distillation_lowers_the_loss_and_the_student_acts_on_the_policy_observation(tiny_trueadapt,  # noqa: F811
+def test_tiny_distillation_lowers_the_loss_and_the_student_acts_on_the_policy_observation(tiny_trueadapt,
                                                                                            tmp_path):
     from pathrl.envs.trueadapt import build_trueadapt_env
     from pathrl.eval.evaluate import load_policy, load_run

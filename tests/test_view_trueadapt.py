@@ -124,15 +124,8 @@ def test_bad_input_is_refused(tmp_path):
 
 
 @pytest.fixture(scope="module")
-def tiny_dataset(tmp_path_factory) -> Path:
-    from pathrl.dataset.generate import generate_dataset
-
-    robot = OmegaConf.to_container(OmegaConf.load(CONF_DIR / "robot" / "iiwa7.yaml"), resolve=True)
-    ds = OmegaConf.load(CONF_DIR / "dataset" / "trueadapt_on_plate.yaml")
-    ds.num_train, ds.num_test = 1, 1
-    dest = tmp_path_factory.mktemp("ta_data") / "tiny"
-    return generate_dataset(robot, OmegaConf.to_container(ds, resolve=False), dest=str(dest), workers=1,
-                            progress=False).path
+def tiny_dataset(tiny_trueadapt) -> Path:
+    return Path(tiny_trueadapt.path)
 
 
 def _tool():
