@@ -26,6 +26,48 @@ from pathrl.envs.trueadapt import build_trueadapt_env
 from pathrl.eval.trueadapt import evaluate, reference_policy, summary
 
 
+def controller_spec(text: str) -> dict:
+    """``reference`` -> {"name": "reference"}; a YAML mapping ``{name: ..., <keys>}`` as it is."""
+    import yaml
+
+    spec = yaml.safe_load(text)
+    spec = {"name": spec} if isinstance(spec, str) else spec
+    if not isinstance(spec, dict):
+        raise ValueError(f"--controller: expected a name or a YAML mapping, got {text!r}")
+    return spec
+
+
+def load(args: argparse.Namespace, num_envs: int, **overrides):
+    """(env, actor) of the command line (``run``, ``task``, ``checkpoint``, ``controller``, ``backend``, ``split``,
+    ``dataset``, ``seed``): the run's config (or the ``task`` experiment's) on `num_envs` envs without autoreset,
+    `overrides` replacing env settings; the actor (obs -> actions) is ``--controller``, the run's controller or the
+    run's checkpoint, None for the reference without adaptation. ValueError / OSError on bad input."""
+    ckpt = None
+    if args.run is None:
+        cfg = to_container(compose("train", [f"+experiment=iiwa7_trueadapt_{args.task}"], TrainAppCfg))
+    else:
+        from pathrl.eval.evaluate import load_run
+
+        cfg, ckpt, _ = load_run(args.run)
+        ckpt = args.checkpoint or ckpt
+    spec = controller_spec(args.controller) if args.controller is not None else cfg.get("controller")
+    cfg["task"]["backend"] = args.backend
+    env = build_trueadapt_env(cfg, args.split, num_envs, args.dataset, args.seed, autoreset=False, **overrides)
+    try:
+        if spec is not None:
+            from pathrl.baselines.controllers import make_controller
+
+            return env, make_controller(spec, env)
+        if args.run is not None:
+            from pathrl.eval.evaluate import load_policy
+
+            return env, load_policy(cfg, env, ckpt)
+        return env, None
+    except BaseException:
+        env.close()
+        raise
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--task", choices=["on_plate", "in_place"], default="on_plate", help="without --run")
@@ -42,40 +84,13 @@ def main() -> None:
     ap.add_argument("--checkpoint", type=Path, default=None, help="with --run: this checkpoint, not the latest")
     args = ap.parse_args()
     torch.set_num_threads(1)
-    if args.run is None:
-        cfg = to_container(compose("train", [f"+experiment=iiwa7_trueadapt_{args.task}"], TrainAppCfg))
-    else:
-        from pathrl.eval.evaluate import load_run
+    try:
+        env, actor = load(args, min(args.num_envs, args.episodes), **({"obs_ball": False} if args.open_loop else {}))
+    except ValueError as exc:
+        raise SystemExit(f"error: {exc}") from None
 
-        cfg, ckpt, _ = load_run(args.run)
-        ckpt = args.checkpoint or ckpt
-    spec = cfg.get("controller")
-    if args.controller is not None:
-        import yaml
-
-        spec = yaml.safe_load(args.controller)
-    cfg["task"]["backend"] = args.backend
-    env = build_trueadapt_env(cfg, args.split, min(args.num_envs, args.episodes), args.dataset, args.seed,
-                              autoreset=False, **({"obs_ball": False} if args.open_loop else {}))
-    policy = reference_policy
-    if spec is not None:
-        from pathrl.baselines.controllers import make_controller
-
-        try:
-            controller = make_controller(spec, env)
-        except ValueError as exc:
-            env.close()
-            raise SystemExit(f"error: {exc}") from None
-
-        def policy(e):
-            return controller(e.get_observations())
-    elif args.run is not None:
-        from pathrl.eval.evaluate import load_policy
-
-        model = load_policy(cfg, env, ckpt)
-
-        def policy(e):
-            return model(e.get_observations())
+    def policy(e):
+        return reference_policy(e) if actor is None else actor(e.get_observations())
 
     traj = torch.arange(args.episodes) % env.bank.num
     try:

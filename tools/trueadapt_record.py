@@ -20,10 +20,8 @@ import sys
 from pathlib import Path
 
 import torch
+from trueadapt_eval import load  # the sibling tool (tools/ is on the path of a script)
 
-from pathrl.cli.common import compose, to_container
-from pathrl.config.schema import TrainAppCfg
-from pathrl.envs.trueadapt import build_trueadapt_env
 from pathrl.eval.trueadapt_record import FILE_NAME, record_trueadapt
 
 
@@ -45,44 +43,6 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     return ap.parse_args(argv)
 
 
-def controller_spec(text: str) -> dict:
-    """``reference`` -> {"name": "reference"}; a YAML mapping as it is."""
-    import yaml
-
-    spec = yaml.safe_load(text)
-    spec = {"name": spec} if isinstance(spec, str) else spec
-    if not isinstance(spec, dict):
-        raise ValueError(f"--controller: expected a name or a YAML mapping, got {text!r}")
-    return spec
-
-
-def load(args: argparse.Namespace):
-    """(env, actor): the config, env and actor as tools/trueadapt_eval.py builds them."""
-    ckpt = None
-    if args.run is None:
-        cfg = to_container(compose("train", [f"+experiment=iiwa7_trueadapt_{args.task}"], TrainAppCfg))
-    else:
-        from pathrl.eval.evaluate import load_run
-
-        cfg, ckpt, _ = load_run(args.run)
-        ckpt = args.checkpoint or ckpt
-    spec = controller_spec(args.controller) if args.controller is not None else cfg.get("controller")
-    cfg["task"]["backend"] = args.backend
-    env = build_trueadapt_env(cfg, args.split, args.episodes, args.dataset, args.seed, autoreset=False,
-                              **({"fail_terminates": False} if args.keep_going else {}))
-    try:
-        if spec is not None:
-            from pathrl.baselines.controllers import make_controller
-
-            return env, make_controller(spec, env)
-        from pathrl.eval.evaluate import load_policy
-
-        return env, load_policy(cfg, env, ckpt)
-    except BaseException:
-        env.close()
-        raise
-
-
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     if args.episodes < 1:
@@ -90,7 +50,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     torch.set_num_threads(1)
     try:
-        env, actor = load(args)
+        env, actor = load(args, args.episodes, **({"fail_terminates": False} if args.keep_going else {}))
     except (ValueError, OSError) as exc:  # RunError, DatasetError, a bad controller or config
         print(f"error: {str(exc).splitlines()[0]}", file=sys.stderr)
         return 2
