@@ -25,37 +25,57 @@ def reference_policy(env: TrueAdaptEnv) -> Tensor:
     return env.reference_actions()
 
 
+#: Per-trajectory outcomes (0/1) and metrics of :func:`run_trajectories`.
+OUTCOMES = ("success", "failed", "dev_terminated")
+METRICS = ("fraction", "acc", "jerk", "offset")
+
+
+def run_trajectories(env: TrueAdaptEnv, policy: Policy, batch: Tensor,
+                     on_step: Callable[[Tensor], None] | None = None) -> dict[str, Tensor]:
+    """Run the trajectories `batch` (bank indices (n,), n <= num_envs) in envs 0..n-1 to their first ending; per
+    trajectory (n,) float64 CPU values of :data:`OUTCOMES` and :data:`METRICS`. `on_step(stepped)` runs after the
+    start (stepped all False) and after every step, stepped (n,) bool marking the episodes that were still running
+    in it (a recorder's hook). Envs whose episode ended keep stepping until the batch is done (autoreset off)."""
+    if env.cfg.autoreset:
+        raise ValueError("run_trajectories: build the env with autoreset=False")
+    n = len(batch)
+    ids = torch.arange(n, device=env.device)
+    env.start(ids, batch.to(env.device))
+    out = {k: torch.zeros(n, dtype=torch.float64) for k in (*OUTCOMES, *METRICS)}
+    pending = torch.zeros(env.num_envs, dtype=torch.bool, device=env.device)
+    pending[ids] = True
+    if on_step is not None:
+        on_step(torch.zeros(n, dtype=torch.bool))
+    while bool(pending.any()):
+        with torch.no_grad():
+            env.step(policy(env))
+        if on_step is not None:
+            on_step(pending[:n].cpu())
+        done = env.last_step["dones"] & pending
+        if bool(done.any()):
+            m = env.episode_metrics(done)
+            at = done[:n].nonzero().squeeze(1).cpu()
+            for k in OUTCOMES:
+                out[k][at] = env.last_step[k][done].double().cpu()
+            for k in METRICS:
+                out[k][at] = m[k].double().cpu()
+            pending &= ~done
+    return out
+
+
 def evaluate(env: TrueAdaptEnv, policy: Policy, trajectories: Tensor) -> dict[str, Tensor]:
-    """Run every trajectory (bank indices (M,)) once, ``env.num_envs`` at a time; per-trajectory metrics (M,).
+    """Run every trajectory (bank indices (M,)) once, ``env.num_envs`` at a time; per-trajectory metrics (M,):
+    :data:`METRICS`, ``success``, ``lost`` (the task failed) and ``deviation_end`` (cut by the deviation limit).
 
     The env must have ``autoreset=False``: an env whose episode ended keeps stepping until its batch is done,
     and only its first ending counts.
     """
-    if env.cfg.autoreset:
-        raise ValueError("evaluate: build the env with autoreset=False")
-    keys = ("success", "fraction", "acc", "jerk", "offset")
-    flags = {"lost": "failed", "deviation_end": "dev_terminated"}
-    out = {k: torch.zeros(len(trajectories), dtype=torch.float64) for k in (*keys, *flags)}
-    n = env.num_envs
-    for lo in range(0, len(trajectories), n):
-        batch = trajectories[lo:lo + n]
-        ids = torch.arange(len(batch), device=env.device)
-        env.start(ids, batch.to(env.device))
-        pending = torch.zeros(n, dtype=torch.bool, device=env.device)
-        pending[ids] = True
-        while bool(pending.any()):
-            with torch.no_grad():
-                env.step(policy(env))
-            done = env.last_step["dones"] & pending
-            if bool(done.any()):
-                m = env.episode_metrics(done)
-                at = lo + done.nonzero().squeeze(1).cpu()
-                out["success"][at] = env.last_step["success"][done].double().cpu()
-                for k, name in flags.items():
-                    out[k][at] = env.last_step[name][done].double().cpu()
-                for k in keys[1:]:
-                    out[k][at] = m[k].cpu()
-                pending &= ~done
+    names = {"success": "success", "lost": "failed", "deviation_end": "dev_terminated", **{k: k for k in METRICS}}
+    out = {k: torch.zeros(len(trajectories), dtype=torch.float64) for k in names}
+    for lo in range(0, len(trajectories), env.num_envs):
+        batch = run_trajectories(env, policy, trajectories[lo:lo + env.num_envs])
+        for k, name in names.items():
+            out[k][lo:lo + len(batch[name])] = batch[name]
     return out
 
 

@@ -22,6 +22,7 @@ from torch import Tensor
 
 from pathrl.envs.feedback import PLATE_SIZE, plate_pose
 from pathrl.envs.trueadapt import TrueAdaptEnv
+from pathrl.eval.trueadapt import run_trajectories
 from pathrl.logging.mcap_io import McapJsonWriter
 from pathrl.logging.schema import LIMIT_FIELDS, TRUEADAPT_EPISODE, TRUEADAPT_ROBOT, TRUEADAPT_STEP
 from pathrl.robot.kinematics import ForwardKinematics, matrix_to_quat
@@ -60,30 +61,16 @@ def _snapshot(env: TrueAdaptEnv, b: _Batch, n: int) -> None:
 
 
 def run_batch(env: TrueAdaptEnv, actor: Actor, traj: Tensor) -> _Batch:
-    """Run trajectories `traj` (bank indices (n,), n <= num_envs) to their ends, keeping every step."""
+    """Run trajectories `traj` (bank indices (n,), n <= num_envs) to their ends
+    (:func:`~pathrl.eval.trueadapt.run_trajectories`), keeping every step."""
     n = len(traj)
-    ids = torch.arange(n, device=env.device)
-    env.start(ids, traj.to(env.device))
-    keys = ("success", "failed", "dev_terminated", "fraction", "acc", "jerk", "offset")
-    b = _Batch([], [], [], [], [], [], [], torch.zeros(n, dtype=torch.long),
-               {k: torch.zeros(n, dtype=torch.float64) for k in keys})
-    _snapshot(env, b, n)
-    pending = torch.zeros(env.num_envs, dtype=torch.bool, device=env.device)
-    pending[ids] = True
-    while bool(pending.any()):
-        with torch.no_grad():
-            env.step(actor(env.get_observations()))
+    b = _Batch([], [], [], [], [], [], [], torch.zeros(n, dtype=torch.long), {})
+
+    def keep(stepped: Tensor) -> None:
         _snapshot(env, b, n)
-        b.length[pending[:n].cpu()] += 1
-        done = env.last_step["dones"] & pending
-        if bool(done.any()):
-            m = env.episode_metrics(done)
-            at = done[:n].nonzero().squeeze(1).cpu()
-            for k in ("success", "failed", "dev_terminated"):
-                b.outcome[k][at] = env.last_step[k][done].double().cpu()
-            for k in ("fraction", "acc", "jerk", "offset"):
-                b.outcome[k][at] = m[k].double().cpu()
-            pending &= ~done
+        b.length[stepped] += 1
+
+    b.outcome = run_trajectories(env, lambda e: actor(e.get_observations()), traj, keep)
     return b
 
 
