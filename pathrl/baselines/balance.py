@@ -40,6 +40,9 @@ from pathrl.baselines.com import StaticCom
 from pathrl.limits.feasible import acceleration_to_action, action_to_acceleration
 from pathrl.limits.integrate import end_of_step
 
+__all__ = ["BalanceCfg", "BalanceController", "BalanceLaw", "chain_matrix", "correction_matrix", "lean_rotation",
+           "lean_vector", "leg_groups", "urdf_joint_axes"]
+
 
 @dataclass(frozen=True)
 class BalanceCfg:

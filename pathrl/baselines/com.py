@@ -16,6 +16,8 @@ from torch import Tensor
 
 from pathrl.robot.kinematics import ForwardKinematics
 
+__all__ = ["StaticCom"]
+
 
 def _urdf_masses(robot: Any, feet: list[str]) -> tuple[list[str], np.ndarray, np.ndarray, str, np.ndarray]:
     """(link names, masses (L,), inertial origins in the link frames (L, 3), base link name, world rotation

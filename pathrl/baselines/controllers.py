@@ -14,6 +14,8 @@ from pathrl.baselines.greedy_follower import GreedyCfg, GreedyFollower
 from pathrl.baselines.trueadapt_tray import AdaptTrayCfg, AdaptTrayController
 from pathrl.envs.tracking import PathTrackingEnv
 
+__all__ = ["CONTROLLERS", "ReferenceReplay", "ReferenceReplayCfg", "make_controller"]
+
 
 @dataclass(frozen=True)
 class ReferenceReplayCfg:

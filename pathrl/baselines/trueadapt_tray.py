@@ -46,6 +46,9 @@ from pathrl.baselines.tracking import tracking_acceleration
 from pathrl.envs.feedback import plate_pose
 from pathrl.robot.kinematics import ForwardKinematics
 
+__all__ = ["AdaptTrayCfg", "AdaptTrayController", "ball_command", "cap_tilt", "pd_gains", "reference_velocities",
+           "tilt_ik"]
+
 
 @dataclass(frozen=True)
 class AdaptTrayCfg:

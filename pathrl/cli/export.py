@@ -21,8 +21,8 @@ KEYS = {"run_dir", "out", "dataset.path", "observations"}
 def _main(argv: list[str]) -> None:
     from pathrl.dataset.io import DatasetError, load_pathset
     from pathrl.deploy.export import export_policy
-    from pathrl.envs.factory import env_cfg_from
     from pathrl.envs.registry import EVAL_ENV, get_task
+    from pathrl.envs.tracking_cfg import TrackingEnvCfg
     from pathrl.eval.evaluate import RunError, load_run
     from pathrl.paths.knots import KnotStrategy
     from pathrl.robot.model import load_robot
@@ -56,8 +56,8 @@ def _main(argv: list[str]) -> None:
         paths = load_pathset(ds, "test", KnotStrategy.from_cfg(cfg["knots"]), robot=robot)
     except (DatasetError, OSError) as exc:
         raise UserError(str(exc).splitlines()[0] if str(exc) else repr(exc)) from None
-    env_cfg = replace(env_cfg_from(cfg, num_envs=min(8, paths.num_paths), seed=0,
-                                   knot_gap_norm=summary.get("knot_gap_norm")),
+    env_cfg = replace(TrackingEnvCfg.from_run(cfg, num_envs=min(8, paths.num_paths), seed=0,
+                                             knot_gap_norm=summary.get("knot_gap_norm")),
                       **EVAL_ENV)
     out = Path(args.get("out") or run_dir / "export")
     try:

@@ -1,6 +1,7 @@
 """Dataclass schemas of every config group. Hydra validates composed YAML against these.
 
-No logic here: the schema names the keys and their types; defaults live in ``conf/``.
+No logic here: the schema names the keys and their types; defaults live in ``conf/``. The ``env`` group's schema is
+the env's own settings class (:class:`pathrl.envs.tracking_cfg.EnvSettings`, defaults there), also used at run time.
 """
 
 from __future__ import annotations
@@ -9,6 +10,10 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from omegaconf import MISSING
+
+from pathrl.config.migrate import CONFIG_VERSION
+from pathrl.envs.path_change_cfg import PathChangeCfg
+from pathrl.envs.tracking_cfg import EnvSettings
 
 
 @dataclass
@@ -97,30 +102,6 @@ class RewardCfg:
 
 
 @dataclass
-class EnvCfg:
-    num_envs: int = 4096
-    dt: float = 0.1
-    control_rate: float = 240.0
-    substeps: int = 8
-    episode_budget_s: float = 16.0
-    scale_budget: bool = True
-    segments: str = "paper"
-    start_range: list[float] = field(default_factory=lambda: [0.0, 0.8])
-    min_fraction: float = 0.2
-    max_deviation: float | None = None
-    stop_tolerance: float = 0.01
-    stop_bonus: bool = True
-    knot_obs: str = "relative"  # relative | absolute (paper)
-    end_obs: bool = True  # vector to the end knot + arc length left, at knot-gap scale
-    end_tolerance: float | None = 0.05  # end reached within this weighted joint distance of the end knot (rad)
-    free_joint_actions: str = "centred"  # joints outside the path: centred (0 holds) | posture | linear (paper)
-    posture_omega: float = 3.0  # free_joint_actions=posture: pull to the start posture (rad/s)
-    tcp_obs: bool = False  # + reference TCP position and reference - commanded TCP in the state (authors' ball)
-    tcp_obs_box: list[float] = field(default_factory=lambda: [-1.0, 1.0, -1.0, 1.0, -0.7, 1.3])  # x, y, z (m)
-    tcp_obs_error: float = 0.1  # TCP error (m) that maps to 1
-
-
-@dataclass
 class TaskCfg:
     """Sensory-feedback task (``conf/task/*.yaml``): ``feedback: null`` is plain path tracking."""
 
@@ -160,10 +141,11 @@ class TrainAppCfg:
     dataset: DatasetCfg = field(default_factory=DatasetCfg)
     knots: KnotsCfg = field(default_factory=KnotsCfg)
     reward: RewardCfg = field(default_factory=RewardCfg)
-    env: EnvCfg = field(default_factory=EnvCfg)
+    env: EnvSettings = field(default_factory=EnvSettings)
     task: TaskCfg = field(default_factory=TaskCfg)
     agent: dict[str, Any] = field(default_factory=dict)  # RSL-RL train cfg, keys verbatim
     experiment: str = MISSING
+    config_version: int = CONFIG_VERSION  # layout of the saved config.yaml (pathrl.config.migrate)
     seed: int = 0
     device: str = "cpu"
     threads: int = 2
@@ -172,8 +154,11 @@ class TrainAppCfg:
     resume: bool = False
     run_dir: str = MISSING
     std_anneal: StdAnnealCfg | None = field(default_factory=lambda: StdAnnealCfg())
+    # bfloat16 hidden layers switch to float32 after this fraction of the iterations (null: never)
+    float32_from: float | None = None
     init_from: str | None = None  # warm start: actor/critic weights of this run or model dir (new inputs start at 0)
     critic_warmup: CriticWarmupCfg = field(default_factory=CriticWarmupCfg)  # a new critic learns alone first
     teacher: dict[str, Any] = field(default_factory=dict)  # agent=distillation: the labelling controller (name: tray)
     # PPO on a residual over a controller: {scale, controller: {name: tray, ...}} (pathrl.policy.residual)
     residual: dict[str, Any] = field(default_factory=dict)
+    path_change: PathChangeCfg | None = None  # path changes during training (path_change=train); None: none

@@ -22,10 +22,10 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from pathrl.envs.factory import env_cfg_from
 from pathrl.envs.registry import EVAL_ENV, get_task
 from pathrl.envs.rewards import build_reward_terms
 from pathrl.envs.tracking import PathTrackingEnv
+from pathrl.envs.tracking_cfg import TrackingEnvCfg
 from pathrl.eval.evaluate import load_policy, load_run
 from pathrl.limits.braking import is_stopped
 from pathrl.limits.integrate import interpolate_step
@@ -67,7 +67,7 @@ class Follower:
             raise FollowerError(f"the follower runs path-tracking policies; this one needs the {feedback} sensor")
         self.robot, self.cfg, self.checkpoint = robot, cfg, checkpoint
         self.knots = KnotStrategy.from_cfg(cfg["knots"])
-        self.env_cfg = replace(env_cfg_from(cfg, num_envs=1, seed=0, knot_gap_norm=knot_gap), **EVAL_ENV)
+        self.env_cfg = replace(TrackingEnvCfg.from_run(cfg, num_envs=1, seed=0, knot_gap_norm=knot_gap), **EVAL_ENV)
         self.env: PathTrackingEnv | None = None
         self.policy: torch.nn.Module | None = None
         self._stopping = False

@@ -3,10 +3,12 @@
 
 - :mod:`pathrl.envs.registry`: ``TASKS``, ``make_env(cfg, split, ...)``, ``check_task``, ``get_task``: which env a
   config's task builds (the one entry point of training, evaluation and the CLIs);
-- :mod:`pathrl.envs.tracking`: ``PathTrackingEnv`` (settings ``TrackingEnvCfg``, :mod:`pathrl.envs.tracking_cfg`);
+- :mod:`pathrl.envs.tracking`: ``PathTrackingEnv``; its settings :mod:`pathrl.envs.tracking_cfg` (``EnvSettings``, the
+  ``env`` config group and its only defaults; ``TrackingEnvCfg.from_run(cfg)``);
 - :mod:`pathrl.envs.terminations`: ``TerminationReason`` and the termination terms;
 - :mod:`pathrl.envs.rewards`: reward terms; :mod:`pathrl.envs.feedback`: the analytic ball and sensors;
 - :mod:`pathrl.envs.trueadapt`, :mod:`pathrl.envs.trueadapt_rewards`: TrueAdapt trajectory adaptation;
-- :mod:`pathrl.envs.factory`: config glue (``env_cfg_from``, ``task_cfg``, saved-run keys ``ADDED_KEYS``, ``NO_TASK``);
+- :mod:`pathrl.envs.factory`: config glue (``task_cfg``, ``make_feedback``); saved runs are brought up to date by
+  :mod:`pathrl.config.migrate`;
 - :mod:`pathrl.envs.state`: snapshot / restore of an env's changing state (resumed training).
 """

@@ -10,7 +10,7 @@ Tasks:
   trueadapt_in_place  TrueAdapt trajectory adaptation, ball kept near its start
                       (both :class:`~pathrl.envs.trueadapt.TrueAdaptEnv`)
 
-Saved runs keep loading: a config without ``task`` is the plain tracking task (:data:`pathrl.envs.factory.NO_TASK`,
+Saved runs keep loading: a config without ``task`` is the plain tracking task (:data:`pathrl.config.migrate.NO_TASK`,
 through :func:`~pathrl.envs.factory.task_cfg`), and the names above are the ones every shipped run was saved with.
 """
 
@@ -20,8 +20,9 @@ from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import Any
 
-from pathrl.envs.factory import env_cfg_from, make_feedback, task_cfg
+from pathrl.envs.factory import make_feedback, task_cfg
 from pathrl.envs.rewards import build_reward_terms
+from pathrl.envs.tracking_cfg import TrackingEnvCfg
 from pathrl.paths.pathset import PathSet
 from pathrl.robot.model import RobotSpec, load_robot
 
@@ -74,7 +75,7 @@ def _build_tracking(cfg: dict[str, Any], req: EnvRequest):
     if paths is None:
         paths = load_pathset(req.dataset_path or cfg["dataset"]["path"], req.split, KnotStrategy.from_cfg(cfg["knots"]),
                              robot=robot, out_of_limits=str(cfg["dataset"].get("out_of_limits", "refuse")))
-    env_cfg = replace(env_cfg_from(cfg, req.num_envs, req.seed, req.knot_gap_norm), **dict(req.overrides))
+    env_cfg = replace(TrackingEnvCfg.from_run(cfg, req.num_envs, req.seed, req.knot_gap_norm), **dict(req.overrides))
     feedback = make_feedback(cfg, robot, env_cfg.num_envs, env_cfg.seed, req.backend)
     if req.open_loop:
         if feedback is None:
@@ -89,7 +90,7 @@ def _build_tracking(cfg: dict[str, Any], req: EnvRequest):
 
 
 def _check_tracking(cfg: dict[str, Any]) -> None:
-    env_cfg_from(cfg)  # the env's values (TrackingEnvCfg checks them); the dataset is checked by the run
+    TrackingEnvCfg.from_run(cfg)  # the env's values (TrackingEnvCfg checks them); the dataset is checked by the run
     build_reward_terms(cfg["reward"]["terms"])
 
 

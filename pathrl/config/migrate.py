@@ -1,0 +1,80 @@
+"""Saved run configs (``config.yaml`` of runs and ``models/``) brought up to the current layout, in one place.
+
+Every config written by ``pathrl-train`` carries ``config_version`` (:data:`CONFIG_VERSION`); configs saved before
+the key existed are version 0. :func:`migrate` applies the steps from a config's version to the current one, so
+that the rest of the code reads every config with all keys present. A step only adds keys, with the value that
+reproduces what the old runs did (their behaviour is the behaviour of the code at the time they were trained).
+
+No Hydra here (the env package reads configs through this module).
+"""
+
+from __future__ import annotations
+
+import copy
+from collections.abc import Callable, Mapping
+from typing import Any
+
+__all__ = ["ADDED_KEYS", "CONFIG_VERSION", "NO_TASK", "config_version", "migrate"]
+
+#: Version of the config layout written by this code.
+CONFIG_VERSION = 1
+
+#: The task of configs saved before tasks existed (plain path tracking).
+NO_TASK: dict[str, Any] = {"name": "tracking", "feedback": None, "backend": "analytic", "workers": 2,
+                           "observe": True, "fail_terminates": True, "imu": False}
+
+#: Keys added to the layout while it was version 0, with the value that reproduces what runs saved without them
+#: did (``group.key``: filled in when the group exists; top-level keys always).
+ADDED_KEYS: dict[str, Any] = {
+    "dataset.out_of_limits": "refuse",
+    "env.knot_obs": "relative",
+    "env.end_obs": False,
+    "env.end_tolerance": None,
+    "env.free_joint_actions": "linear",
+    "env.posture_omega": 3.0,
+    "env.tcp_obs": False,
+    "env.tcp_obs_box": [-1.0, 1.0, -1.0, 1.0, -0.7, 1.3],
+    "env.tcp_obs_error": 0.1,
+    "task.imu": False,
+    "task.adapt": {},
+    "init_from": None,
+    "float32_from": None,
+    "teacher": {},
+    "residual": {},
+    "critic_warmup": {"iterations": 0, "learning_rate": None},
+}
+
+
+def config_version(cfg: Mapping[str, Any]) -> int:
+    """The layout version of a config (0: saved before ``config_version`` existed); ValueError for a version this
+    code does not know (a config from newer code)."""
+    version = cfg.get("config_version", 0)
+    if not isinstance(version, int) or isinstance(version, bool) or not 0 <= version <= CONFIG_VERSION:
+        raise ValueError(f"config_version: expected an integer 0..{CONFIG_VERSION}, got {version!r} "
+                         "(a config written by a newer pathrl?)")
+    return version
+
+
+def _v0_to_v1(cfg: dict[str, Any]) -> None:
+    """Version 0 -> 1: the task group of configs from before tasks, and every key of :data:`ADDED_KEYS`."""
+    cfg["task"] = {**NO_TASK, **(cfg.get("task") or {})}
+    for dotted, value in ADDED_KEYS.items():
+        group, _, key = dotted.rpartition(".")
+        target = cfg.get(group) if group else cfg
+        if isinstance(target, dict) and key not in target:
+            target[key] = copy.deepcopy(value)
+
+
+#: Step ``k`` brings a version-``k`` config to version ``k + 1`` (in place).
+STEPS: tuple[Callable[[dict[str, Any]], None], ...] = (_v0_to_v1,)
+
+
+def migrate(cfg: Mapping[str, Any]) -> dict[str, Any]:
+    """A copy of a resolved or saved run config in the current layout (:data:`CONFIG_VERSION`); a current config
+    comes back equal. ValueError for a config from newer code."""
+    version = config_version(cfg)
+    out = copy.deepcopy(dict(cfg))
+    for step in STEPS[version:]:
+        step(out)
+    out["config_version"] = CONFIG_VERSION
+    return out
