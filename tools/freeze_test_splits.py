@@ -16,7 +16,10 @@ from pathrl.dataset.io import load_dataset, save_dataset
 
 ROOT = Path(__file__).resolve().parents[1]
 DATASETS = [("iiwa7", "random"), ("iiwa7", "target_point"), ("iiwa7", "ball_balancing"), ("armar6", "random"),
-            ("armar4", "random"), ("armar4", "target_point")]
+            ("armar4", "random"), ("armar4", "target_point"), ("iiwa7", "trueadapt_on_plate"),
+            ("iiwa7", "trueadapt_in_place")]
+#: Only the first N test paths are kept (the ones the tables evaluate), to keep the repository small.
+FIRST = {("iiwa7", "trueadapt_on_plate"): 1000, ("iiwa7", "trueadapt_in_place"): 1000}
 
 
 def main() -> None:
@@ -37,9 +40,22 @@ def main() -> None:
         meta["frozen_from"] = {"splits": ds.meta["splits"], "content_hash": ds.meta["content_hash"],
                                "created": ds.meta.get("created")}
         stats = {"test": ds.meta["stats"]["test"]} if "test" in ds.meta.get("stats", {}) else None
-        out = save_dataset(args.dest / robot / name, {"test": ds.splits["test"].items()}, meta, overwrite=True,
-                           stats=stats)
-        print(f"{out.path}: {len(ds.splits['test'])} test paths")
+        items = ds.splits["test"].items()
+        if (robot, name) in FIRST:  # a subset: its statistics are recomputed
+            items, stats = items[:FIRST[robot, name]], None
+            meta["frozen_from"]["first_test_paths"] = len(items)
+            if "trajectories" in meta:
+                meta["trajectories"] = {"test": trueadapt_stats(robot, [q for _, q in items], meta["sample_dt"])}
+        out = save_dataset(args.dest / robot / name, {"test": items}, meta, overwrite=True, stats=stats)
+        print(f"{out.path}: {len(out.splits['test'])} test paths")
+
+
+def trueadapt_stats(robot: str, trajs: list, dt: float) -> dict:
+    """The TrueAdapt trajectory statistics (``trajectories`` in dataset.json) of a subset."""
+    from pathrl.dataset.trueadapt import trajectory_stats
+    from pathrl.robot.model import load_robot_by_name
+
+    return trajectory_stats(trajs, load_robot_by_name(robot), dt)
 
 
 if __name__ == "__main__":

@@ -3,7 +3,9 @@
 Every evaluation (a shipped policy on a test split) and every TOPP-RA baseline (the same split, knots and
 episode plan) runs once, even when several table rows use it. Outputs (written atomically):
 results/tables.md, tables.csv, tables.tex, figures/*.png, raw/<evaluation>/metrics.json, raw/<toppra>.json;
-each step's console output goes to results/logs/<step>.log.
+each step's console output goes to results/logs/<step>.log. The TrueAdapt paper's Table I (pathrl/repro/trueadapt.py):
+its shipped policies and controllers on the committed test splits, the ball in PyBullet, and the 10^5-trajectory
+limit validation (raw/trueadapt_validation.json); --only takes their names too (e.g. trueadapt_validation).
 
 Profiles:
   full   1200 paper segments per evaluation on the committed test splits (datasets/), policies from models/.
@@ -35,6 +37,7 @@ import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+from pathrl.repro import trueadapt as adapt  # noqa: E402
 from pathrl.repro.figures import CURVES, learning_curves, pareto_table_ii, path_overlay  # noqa: E402
 from pathrl.repro.render import render_latex, render_markdown  # noqa: E402
 from pathrl.repro.tables import (  # noqa: E402
@@ -167,6 +170,13 @@ def build_plan(args: argparse.Namespace, profile: Profile, lay: Layout) -> Plan:
     for b in bases:
         plan.add("evaluate", f"TOPP-RA {b.robot}/{b.dataset} ({b.segments})",
                  lambda b=b: toppra(b, profile, lay, args.reuse, logs, toppra_workers))
+    for a in adapt.evaluations(only):  # TrueAdapt Table I (the ball in PyBullet), then its limit validation
+        plan.add("evaluate", f"evaluate {a.id}", lambda a=a: run_script(adapt.eval_command(
+            a, ROOT, lay.out / "raw", profile.episodes or adapt.EPISODES, args.reuse), logs / f"eval_{a.id}.log"))
+    if only is None or adapt.VALIDATION_ID in only:
+        n = 1000 if profile.name == "quick" else 100_000
+        plan.add("evaluate", "TrueAdapt limit validation", lambda: run_script(adapt.validation_command(
+            ROOT, lay.out / "raw", n, args.reuse), logs / f"{adapt.VALIDATION_ID}.log"))
     if only is None:
         for key, robot, split in REALTIME:
             plan.add("timing", f"real time {key}", lambda key=key, robot=robot, split=split: realtime(
@@ -182,7 +192,9 @@ def build_plan(args: argparse.Namespace, profile: Profile, lay: Layout) -> Plan:
 #: file in the output dir, overrides). The shipped TD3 policies are evaluated; MPGD and bisection run in full.
 INDUSTRIAL = (("table2", "out_table2", "industrial_table2.md", ("policy=models/industrial_td3",)),
               ("table2", "out_table2", "industrial_table2_noise.md",
-               ("policy=models/industrial_td3", "controller.noise_mm=0.05", "controller.runs=5")),
+               ("policy=models/industrial_td3", "controller.noise_mm=0.05", "controller.runs=5", "seed_runs=[]")),
+              ("validate", "out_validation", "industrial_validation.md", ()),
+              ("timing", "out_timing", "industrial_timing.md", ("policy=models/industrial_td3",)),
               ("speed", "out_speed", "industrial_speed.md", ()),
               ("speed", "out_speed", "industrial_speed_rl.md", ("policy=models/industrial_td3",)),
               ("table4", "out_table4", "industrial_table4.md", ()),
@@ -197,6 +209,12 @@ def industrial(lay: Layout, reuse: bool, logs: Path) -> None:
             continue
         shown = out.relative_to(ROOT) if out.is_relative_to(ROOT) else out  # as the table's "Measured with" line
         sh([str(BIN / "pathrl-industrial"), command, *overrides, f"{key}={shown}"], logs / f"industrial_{out.stem}.log")
+
+
+def run_script(cmd: list[str] | None, log: Path) -> None:
+    """Run a tools/ script with the project's Python (None: nothing to do)."""
+    if cmd is not None:
+        sh([sys.executable, *cmd], log)
 
 
 def tiny_dataset(robot: str, name: str, test_dir: str, profile: Profile, lay: Layout, reuse: bool,
@@ -331,6 +349,8 @@ def collect(lay: Layout) -> dict:
         p = lay.out / "raw" / f"realtime_{key}.json"
         if p.is_file():
             res["realtime"][key] = json.loads(p.read_text())
+    res.update(adapt.collect(lay.out / "raw", ROOT / "models"))
+    res["training"].update(res.pop("trueadapt_training"))
     return res
 
 
@@ -414,7 +434,7 @@ def main() -> None:
     if args.jobs < 1:
         sys.exit(f"error: --jobs must be >= 1, got {args.jobs}")
     out = Path(args.out) if args.out else ROOT / ("results" if profile.name == "full" else "results/quick")
-    known = {r.evaluation.model for r in ROWS}
+    known = {r.evaluation.model for r in ROWS} | adapt.names()
     unknown = set(filter(None, args.only.split(","))) - known
     if unknown:
         sys.exit(f"error: --only: unknown model(s) {sorted(unknown)}; known: {sorted(known)}")

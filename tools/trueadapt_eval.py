@@ -6,16 +6,21 @@
     .venv/bin/python tools/trueadapt_eval.py --controller '{name: trueadapt_tray, kp: 2.25}'  # a controller
     .venv/bin/python tools/trueadapt_eval.py --run models/iiwa7_trueadapt_on_plate_tray  # config.yaml: controller:
     .venv/bin/python tools/trueadapt_eval.py --run runs/<run> --checkpoint runs/<run>/model_100.pt
+    .venv/bin/python tools/trueadapt_eval.py --task on_plate --out results/raw/<name>   # also <name>/metrics.json
 
 Trajectories 0 .. episodes-1 of the split (cycled), ``--num-envs`` at a time, deterministic policy actions. Prints
-the success rate, the trajectory fraction executed before the task failed, the mean normalised |a| and |jerk| and
-the mean ball offset from its start (m) as JSON.
+the success rate, the trajectory fraction executed before the task failed, the mean normalised |a| and |jerk|, the
+mean ball offset from its start (m) and the limit violations of the commanded 240 Hz setpoints as JSON. Without
+``--dataset``, a config's ``data/<robot>/<set>`` that is not on this machine falls back to the committed test split
+``datasets/<robot>/<set>`` (``--split test`` only).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import sys
+import time
 from pathlib import Path
 
 import torch
@@ -23,7 +28,9 @@ import torch
 from pathrl.cli.common import compose, to_container
 from pathrl.config.schema import TrainAppCfg
 from pathrl.envs.trueadapt import build_trueadapt_env
+from pathrl.eval.evaluate import committed_split
 from pathrl.eval.trueadapt import evaluate, reference_policy, summary
+from pathrl.eval.trueadapt_limits import LimitCounter
 
 
 def controller_spec(text: str) -> dict:
@@ -52,7 +59,11 @@ def load(args: argparse.Namespace, num_envs: int, **overrides):
         ckpt = args.checkpoint or ckpt
     spec = controller_spec(args.controller) if args.controller is not None else cfg.get("controller")
     cfg["task"]["backend"] = args.backend
-    env = build_trueadapt_env(cfg, args.split, num_envs, args.dataset, args.seed, autoreset=False, **overrides)
+    if getattr(args, "workers", None) is not None:
+        cfg["task"]["workers"] = args.workers
+    dataset = args.dataset or committed_split(cfg["dataset"]["path"], args.split)
+    args.resolved_dataset = dataset  # recorded with the result
+    env = build_trueadapt_env(cfg, args.split, num_envs, dataset, args.seed, autoreset=False, **overrides)
     try:
         if spec is not None:
             from pathrl.baselines.controllers import make_controller
@@ -82,6 +93,8 @@ def main() -> None:
     ap.add_argument("--controller", default=None, help="a controller spec (YAML mapping, e.g. "
                     "'{name: trueadapt_tray}') to evaluate on the --task experiment's config")
     ap.add_argument("--checkpoint", type=Path, default=None, help="with --run: this checkpoint, not the latest")
+    ap.add_argument("--workers", type=int, default=None, help="PyBullet worker processes (default: the config's)")
+    ap.add_argument("--out", type=Path, default=None, help="also write the result to OUT/metrics.json")
     args = ap.parse_args()
     torch.set_num_threads(1)
     try:
@@ -93,10 +106,22 @@ def main() -> None:
         return reference_policy(e) if actor is None else actor(e.get_observations())
 
     traj = torch.arange(args.episodes) % env.bank.num
+    limits = LimitCounter(env)
+    t0 = time.perf_counter()
     try:
-        print(json.dumps(summary(evaluate(env, policy, traj)) | {"backend": args.backend}, indent=1))
+        res = summary(evaluate(env, policy, traj, limits)) | {"backend": args.backend}
     finally:
         env.close()
+    res |= {"limit_violations": limits.counts["total"], "limit_violations_by_kind": limits.counts,
+            "setpoints_checked": limits.checked, "dataset": args.resolved_dataset, "split": args.split,
+            "trajectories_in_split": env.bank.num,
+            "seconds": round(time.perf_counter() - t0, 1), "command": " ".join(sys.argv)}
+    print(json.dumps(res, indent=1))
+    if args.out is not None:
+        from pathrl.storage import write_json_atomic
+
+        args.out.mkdir(parents=True, exist_ok=True)
+        write_json_atomic(args.out / "metrics.json", res)
 
 
 if __name__ == "__main__":

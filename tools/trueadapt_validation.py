@@ -2,6 +2,7 @@
 
     .venv/bin/python tools/trueadapt_validation.py --trajectories 100000 --steps 100
     .venv/bin/python tools/trueadapt_validation.py --trajectories 0 --plot docs/trueadapt_validation.png
+    .venv/bin/python tools/trueadapt_validation.py --out results/raw/trueadapt_validation.json   # also as JSON
 
 Prints the violation counts of both modes as JSON; ``--plot`` draws one trajectory per mode (joint ``--joint``:
 position, velocity, acceleration, jerk against their limits), like the paper's Figs. 5 (maximum) and 6 (random).
@@ -57,6 +58,7 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--joint", type=int, default=0, help="joint index for the plot")
     ap.add_argument("--plot", type=Path, default=None)
+    ap.add_argument("--out", type=Path, default=None, help="also write the results to this JSON file")
     args = ap.parse_args()
     torch.set_num_threads(1)
     limits = JointLimits.from_robot(load_robot_by_name("iiwa7"))
@@ -65,6 +67,11 @@ def main() -> None:
     if args.trajectories > 0:
         out = [asdict(validate(limits, args.trajectories, args.steps, mode=m, seed=args.seed)) for m in MODES]
         print(json.dumps(out, indent=1))
+        if args.out is not None:
+            from pathrl.storage import write_json_atomic
+
+            args.out.parent.mkdir(parents=True, exist_ok=True)
+            write_json_atomic(args.out, out)
 
 
 if __name__ == "__main__":

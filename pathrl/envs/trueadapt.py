@@ -42,6 +42,9 @@ from pathrl.limits.feasible import JointLimits, valid_acceleration_range
 from pathrl.limits.integrate import end_of_step, interpolate_step
 from pathrl.robot.model import RobotSpec
 
+__all__ = ["MODES", "AdaptEnvCfg", "TrueAdaptEnv", "adapt_cfg_from", "ball_border_position", "build_trueadapt_env",
+           "check_adapt_cfg", "clip_to_range"]
+
 try:  # rsl-rl is a training dependency; the env works without it (evaluation, tests).
     from rsl_rl.env import VecEnv as _VecEnvBase
 except ImportError:  # pragma: no cover

@@ -17,6 +17,8 @@ from torch import Tensor
 
 from pathrl.envs.trueadapt import TrueAdaptEnv
 
+__all__ = ["METRICS", "OUTCOMES", "evaluate", "reference_policy", "run_trajectories", "summary"]
+
 Policy = Callable[[TrueAdaptEnv], Tensor]
 
 
@@ -63,9 +65,11 @@ def run_trajectories(env: TrueAdaptEnv, policy: Policy, batch: Tensor,
     return out
 
 
-def evaluate(env: TrueAdaptEnv, policy: Policy, trajectories: Tensor) -> dict[str, Tensor]:
+def evaluate(env: TrueAdaptEnv, policy: Policy, trajectories: Tensor,
+             on_step: Callable[[Tensor], None] | None = None) -> dict[str, Tensor]:
     """Run every trajectory (bank indices (M,)) once, ``env.num_envs`` at a time; per-trajectory metrics (M,):
     :data:`METRICS`, ``success``, ``lost`` (the task failed) and ``deviation_end`` (cut by the deviation limit).
+    `on_step`: :func:`run_trajectories`' hook, for every batch (e.g. ``trueadapt_limits.LimitCounter``).
 
     The env must have ``autoreset=False``: an env whose episode ended keeps stepping until its batch is done,
     and only its first ending counts.
@@ -73,7 +77,7 @@ def evaluate(env: TrueAdaptEnv, policy: Policy, trajectories: Tensor) -> dict[st
     names = {"success": "success", "lost": "failed", "deviation_end": "dev_terminated", **{k: k for k in METRICS}}
     out = {k: torch.zeros(len(trajectories), dtype=torch.float64) for k in names}
     for lo in range(0, len(trajectories), env.num_envs):
-        batch = run_trajectories(env, policy, trajectories[lo:lo + env.num_envs])
+        batch = run_trajectories(env, policy, trajectories[lo:lo + env.num_envs], on_step)
         for k, name in names.items():
             out[k][lo:lo + len(batch[name])] = batch[name]
     return out

@@ -28,6 +28,8 @@ from pathrl.logging.schema import LIMIT_FIELDS, TRUEADAPT_EPISODE, TRUEADAPT_ROB
 from pathrl.robot.kinematics import ForwardKinematics, matrix_to_quat
 from pathrl.storage import atomic_write
 
+__all__ = ["FILE_NAME", "NOMINAL_RADIUS", "record_trueadapt", "robot_message", "run_batch"]
+
 FILE_NAME = "trueadapt.mcap"
 Actor = Callable[[TensorDict], Tensor]
 #: radius shown for a ball whose simulator does not expose it (the PyBullet scene draws its own)

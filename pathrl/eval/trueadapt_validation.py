@@ -19,6 +19,8 @@ from pathrl.limits.check import KINDS, limit_violations
 from pathrl.limits.feasible import JointLimits, valid_acceleration_range
 from pathrl.limits.integrate import end_of_step, interpolate_step
 
+__all__ = ["MODES", "ValidationResult", "trace", "validate"]
+
 MODES = ("random", "max")
 
 

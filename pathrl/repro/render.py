@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from typing import Any
 
+from pathrl.repro import trueadapt
 from pathrl.repro.tables import (
     AUTHORS_BUDGETS,
     PAPER_TABLE,
@@ -274,6 +275,9 @@ def render_markdown(results: dict[str, Any], paper: dict[str, Any], profile: str
     body, rows = _path_change(results)
     lines += [""] + body
     csv_rows += rows
+    body, rows = trueadapt.markdown(results)
+    lines += [""] + body
+    csv_rows += rows
     training = _training(results)
     if training:
         lines += [""] + training
@@ -305,4 +309,5 @@ def render_latex(results: dict[str, Any], paper: dict[str, Any]) -> str:
                 cells.append(f"{ours} ({_fmt(p.get(c), _nd(c))})" if c in p else ours)
             out.append(_tex_escape(row.key) + " & " + " & ".join(cells) + r" \\")
         out += [r"\bottomrule", r"\end{tabular}", ""]
+    out += trueadapt.latex(results)
     return "\n".join(out)

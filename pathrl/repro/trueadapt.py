@@ -1,0 +1,276 @@
+"""The TrueAdapt paper's Table I (online adaptation of reference trajectories, ball on plate) as data and rendering.
+
+Each row is a setting of the paper; ``AdaptEval`` says which shipped policy (or the reference without adaptation, or
+a model-based controller) fills our cells, on which split and ball. An evaluation runs ``tools/trueadapt_eval.py``
+and writes ``results/raw/<id>/metrics.json``; the 10^5-trajectory limit validation (Sec. VI-D) runs
+``tools/trueadapt_validation.py`` into ``results/raw/trueadapt_validation.json``. The paper's values are
+``trueadapt_paper.yaml`` next to this file. Rendering is a pure function of those results.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from functools import cache
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+ADAPT_TABLE = "trueadapt_table_I"
+PAPER_FILE = Path(__file__).with_name("trueadapt_paper.yaml")
+ROBOT = "iiwa7"
+#: Our metric columns (the paper's Table I), and the raw result's key and scale for each.
+COLUMNS = ("success_pct", "fraction_pct", "error_distance_cm", "acc_pct", "jerk_pct")
+RAW = {"success_pct": "success", "fraction_pct": "fraction", "error_distance_cm": "offset", "acc_pct": "acc",
+       "jerk_pct": "jerk"}
+HEADERS = ("success rate (%)", "trajectory fraction (%)", "error distance (cm)", "mean norm. \\|acc\\| (%)",
+           "mean norm. \\|jerk\\| (%)")
+VALIDATION_ID = "trueadapt_validation"
+VALIDATION_STEPS = 100  # decision steps (5 s) per validation trajectory
+#: Evaluated trajectories: the committed test split's 1000 (the first 1000 of the train split for that row).
+EPISODES = 1000
+TRAIN_MISSING = ("not available: needs the uncommitted train split data/iiwa7/trueadapt_on_plate "
+                 "(`pathrl-dataset generate robot=iiwa7 dataset=trueadapt_on_plate`)")
+
+
+@dataclass(frozen=True)
+class AdaptEval:
+    """`models/<model>` (None: the reference without adaptation) on trajectories 0..EPISODES-1 of a split of
+    ``trueadapt_<task>``, deterministic, seed 0."""
+
+    task: str  # on_plate | in_place
+    model: str | None = None
+    split: str = "test"  # test: the committed split (datasets/); train: data/ (gitignored)
+    open_loop: bool = False  # the ball measurement frozen at its first value
+    backend: str = "pybullet"  # ball simulation: pybullet | analytic
+
+    @property
+    def name(self) -> str:
+        """The name ``--only`` selects it by (the model, or ``iiwa7_trueadapt_<task>_reference``)."""
+        return self.model or f"{ROBOT}_trueadapt_{self.task}_reference"
+
+    @property
+    def id(self) -> str:
+        """Directory under results/raw/."""
+        base = self.name if self.split == "test" else f"{self.name}_{self.split}_split"
+        base = f"{base}_in_pybullet" if self.backend == "pybullet" else base
+        return f"{base}_open_loop" if self.open_loop else base
+
+    @property
+    def dataset(self) -> str:
+        return f"trueadapt_{self.task}"
+
+
+@dataclass(frozen=True)
+class AdaptRow:
+    key: str  # row key in trueadapt_paper.yaml (or ours)
+    setting: str  # the paper's setting
+    ours: str  # what fills our cells
+    evaluation: AdaptEval | None = None  # None: nothing shipped for it (a dash)
+    in_paper: bool = True
+
+
+DISTILL = "iiwa7_trueadapt_on_plate_distill"
+_STUDENT = "distilled policy"
+_TRAY = "**tray controller: privileged information, not in the paper**"
+
+ROWS: tuple[AdaptRow, ...] = (
+    AdaptRow("on_plate/reference", "on plate: reference trajectories (no adaptations)", "the reference replayed",
+             AdaptEval("on_plate")),
+    AdaptRow("on_plate/test_set", "on plate: TrueAdapt, test set", _STUDENT, AdaptEval("on_plate", DISTILL)),
+    AdaptRow("on_plate/training_set", "on plate: TrueAdapt, training set", _STUDENT + ", first 1000 training "
+             "trajectories (data/)", AdaptEval("on_plate", DISTILL, split="train")),
+    AdaptRow("on_plate/open_loop_evaluation", "on plate: open loop, evaluation only",
+             _STUDENT + ", ball measurement frozen", AdaptEval("on_plate", DISTILL, open_loop=True)),
+    AdaptRow("on_plate/open_loop_training", "on plate: open loop, training and evaluation", "not trained"),
+    AdaptRow("on_plate/no_current_position", "on plate: state without current position", "not trained"),
+    AdaptRow("on_plate/no_current_velocity", "on plate: state without current velocity", "not trained"),
+    AdaptRow("on_plate/no_current_acceleration", "on plate: state without current acceleration", "not trained"),
+    AdaptRow("on_plate/no_following_positions", "on plate: state without following positions", "not trained"),
+    AdaptRow("on_plate/ten_following_positions", "on plate: state with ten following positions", "not trained"),
+    AdaptRow("on_plate/no_jerk_penalty", "on plate: no jerk penalty", "not trained"),
+    AdaptRow("on_plate/no_acceleration_penalty", "on plate: no acceleration penalty", "not trained"),
+    AdaptRow("on_plate/tray_controller", "on plate: model-based tray controller", _TRAY,
+             AdaptEval("on_plate", "iiwa7_trueadapt_on_plate_tray_controller"), in_paper=False),
+    AdaptRow("in_place/reference", "in place: reference trajectories (no adaptations)", "the reference replayed",
+             AdaptEval("in_place")),
+    AdaptRow("in_place/test_set", "in place: TrueAdapt, test set", "no shipped in-place policy"),
+    AdaptRow("in_place/real_robot", "in place: TrueAdapt, real robot", "no real robot"),
+    AdaptRow("in_place/open_loop_evaluation", "in place: open loop, evaluation only", "no shipped in-place policy"),
+    AdaptRow("in_place/open_loop_training", "in place: open loop, training and evaluation", "not trained"),
+    AdaptRow("in_place/tray_controller", "in place: model-based tray controller", _TRAY,
+             AdaptEval("in_place", "iiwa7_trueadapt_in_place_tray_controller"), in_paper=False),
+)
+
+
+def evaluations(only: set[str] | None = None) -> list[AdaptEval]:
+    """Distinct evaluations of the table in row order (``only``: those whose ``name`` it holds)."""
+    evs = (r.evaluation for r in ROWS if r.evaluation is not None)
+    return list(dict.fromkeys(e for e in evs if only is None or e.name in only))
+
+
+def names() -> set[str]:
+    """Every name ``--only`` accepts for this table (evaluations and the validation)."""
+    return {e.name for e in evaluations()} | {VALIDATION_ID}
+
+
+@cache
+def paper() -> dict[str, Any]:
+    """The paper's Table I (``trueadapt_paper.yaml``): {"columns": [...], "rows": {key: [...]}}."""
+    return yaml.safe_load(PAPER_FILE.read_text())[ADAPT_TABLE]
+
+
+def eval_command(e: AdaptEval, root: Path, raw: Path, episodes: int, reuse: bool = False) -> list[str] | None:
+    """Script and arguments (run with the project's Python in `root`) that evaluate `e` into
+    `raw`/<id>/metrics.json, or None when it is skipped: its model is not shipped, the train split it needs is not
+    on this machine, or (`reuse`) its result exists. Test splits come from ``datasets/`` (committed), the train
+    split from ``data/``; one PyBullet worker process (evaluations run side by side)."""
+    out = raw / e.id
+    data = root / ("datasets" if e.split == "test" else "data")
+    if unavailable(e, root / "models", data) is not None or (reuse and (out / "metrics.json").is_file()):
+        return None
+
+    def rel(p: Path) -> str:
+        return str(p.relative_to(root)) if p.is_relative_to(root) else str(p)
+
+    run = ["--run", rel(root / "models" / e.model)] if e.model else ["--task", e.task]
+    return ["tools/trueadapt_eval.py", *run, "--dataset", rel(data / ROBOT / e.dataset), "--split", e.split,
+            "--episodes", str(episodes), "--seed", "0", "--backend", e.backend, "--workers", "1", "--out", rel(out),
+            *(["--open-loop"] if e.open_loop else [])]
+
+
+def validation_command(root: Path, raw: Path, trajectories: int, reuse: bool = False) -> list[str] | None:
+    """Script and arguments (run in `root`) of the Sec. VI-D limit validation into
+    `raw`/trueadapt_validation.json, or None (`reuse` and the result exists)."""
+    out = raw / f"{VALIDATION_ID}.json"
+    if reuse and out.is_file():
+        return None
+    shown = str(out.relative_to(root)) if out.is_relative_to(root) else str(out)
+    return ["tools/trueadapt_validation.py", "--trajectories", str(trajectories), "--steps",
+            str(VALIDATION_STEPS), "--out", shown]
+
+
+def unavailable(e: AdaptEval, models: Path, data: Path) -> str | None:
+    """Why `e` is not evaluated here (its model is not shipped, or it needs the uncommitted train split and
+    `data` lacks it), or None. A missing committed test split is no reason: the evaluation fails loudly."""
+    if e.model is not None and not (models / e.model / "config.yaml").is_file():
+        return f"{models / e.model} not shipped"
+    if e.split == "train" and not (data / ROBOT / e.dataset / "train.npz").is_file():
+        return TRAIN_MISSING
+    return None
+
+
+def collect(raw: Path, models: Path) -> dict[str, Any]:
+    """{"trueadapt": {id: metrics.json}, "trueadapt_validation": its JSON or None, "trueadapt_training":
+    {model: summary.json}} of the results in `raw` (a result of a model no longer shipped is left out)."""
+    out: dict[str, Any] = {"trueadapt": {}, "trueadapt_validation": None, "trueadapt_training": {}}
+    for e in evaluations():
+        p = raw / e.id / "metrics.json"
+        if p.is_file() and (e.model is None or (models / e.model).is_dir()):
+            out["trueadapt"][e.id] = json.loads(p.read_text())
+        s = models / (e.model or "-") / "summary.json"
+        if e.model and s.is_file():
+            out["trueadapt_training"][e.model] = json.loads(s.read_text())
+    v = raw / f"{VALIDATION_ID}.json"
+    if v.is_file():
+        out["trueadapt_validation"] = json.loads(v.read_text())
+    return out
+
+
+def _fmt(x: float | None, nd: int = 1) -> str:
+    return "–" if x is None else f"{x:.{nd}f}"
+
+
+def ours(metrics: dict[str, Any] | None, column: str) -> float | None:
+    """Our value of `column` (percent or cm) from a raw result."""
+    if metrics is None or metrics.get(RAW[column]) is None:
+        return None
+    return 100.0 * float(metrics[RAW[column]])
+
+
+def _cell(value: float | None, paper_value: float | None, task: str, column: str) -> str:
+    if value is None:
+        return "–" if paper_value is None else f"– / {_fmt(paper_value)}"
+    if column == "error_distance_cm" and task == "on_plate":  # not the task's metric: ours in brackets
+        return f"({_fmt(value)})"
+    return f"**{_fmt(value)}**" if paper_value is None else f"**{_fmt(value)}** / {_fmt(paper_value)}"
+
+
+def _row_values(results: dict[str, Any], row: AdaptRow) -> tuple[dict[str, Any] | None, dict[str, float | None]]:
+    """(raw result or None, the paper's values by column) of a row."""
+    p = paper()
+    pv = dict(zip(p["columns"], p["rows"].get(row.key, [None] * len(p["columns"])), strict=True))
+    m = None if row.evaluation is None else results.get("trueadapt", {}).get(row.evaluation.id)
+    return m, pv
+
+
+def _validation_line(v: list[dict[str, Any]] | None) -> str:
+    if not v:
+        return "Limit validation (Sec. VI-D): not run."
+    mode = {"random": "random accelerations", "max": "the maximum acceleration every step"}
+    parts = [f"{mode.get(r['mode'], r['mode'])}: {r['trajectories']} trajectories x {r['steps']} steps, "
+             f"**{r['violations']['total']} violations** in {r['setpoints_checked']:.2e} (setpoint, joint) pairs "
+             f"({r['seconds']:.0f} s)" for r in v]
+    return ("Limit validation like the paper's Sec. VI-D (`tools/trueadapt_validation.py --steps "
+            f"{VALIDATION_STEPS}`; accelerations drawn from the valid range, or its maximum, every 50 ms step, "
+            "checked at 240 Hz against position, velocity, acceleration and jerk limits; one thread): "
+            + "; ".join(parts) + ".")
+
+
+CAPTION = (
+    "Each cell: **ours** / paper. The ball is simulated in PyBullet for every row of ours (column *ball*; the "
+    "scene draws the ball's radius, mass and friction, 2 mm sensor noise), on the 1000 trajectories of the committed "
+    "test split (`datasets/iiwa7/trueadapt_<task>`; the paper: 10 000), deterministic actions, seed 0 "
+    "(`tools/trueadapt_eval.py`). Error distance: mean distance of the ball from its start, the in-place metric; "
+    "on plate ours is shown in brackets. Acceleration and jerk: mean normalised |a| and |jerk| over joints and "
+    "steps. Limit violations: commanded 240 Hz setpoints outside the position, velocity, acceleration or jerk "
+    "limits (checked, not assumed). *Distilled policy*: `models/iiwa7_trueadapt_on_plate_distill`, a network with "
+    "the paper's state taught by the tray controller (DAgger), not trained with PPO as the paper's. *Tray "
+    "controller*: `models/iiwa7_trueadapt_<task>_tray_controller` (`pathrl/baselines/trueadapt_tray.py`), no "
+    "learning; it reads privileged information a policy does not get (the whole reference with its velocities and "
+    "accelerations, the plate kinematics, its own filter state), so it is a feasibility bound, not a result "
+    "comparable with the paper's. Rows without a trained policy of ours show a dash.")
+
+
+def markdown(results: dict[str, Any]) -> tuple[list[str], list[list[str]]]:
+    """The table's Markdown lines and CSV rows (table, row, metric, ours, paper)."""
+    lines = ["## TrueAdapt Table I: online adaptation of reference trajectories (iiwa7, ball on plate, PyBullet)",
+             "", CAPTION, "",
+             "| setting | ours | " + " | ".join(HEADERS) + " | ball | episodes | limit violations |",
+             "|---|---|" + "---|" * (len(HEADERS) + 3)]
+    csv_rows: list[list[str]] = []
+    for row in ROWS:
+        m, pv = _row_values(results, row)
+        task = row.key.split("/")[0]
+        what = row.ours
+        if m is None and row.evaluation is not None and row.evaluation.split == "train":
+            what = f"{row.ours}; {TRAIN_MISSING}"
+        cells = [_cell(ours(m, c), pv[c], task, c) for c in COLUMNS]
+        tail = ["–", "–", "–"] if m is None else [str(m.get("backend", "–")), str(m["episodes"]),
+                                                   str(m.get("limit_violations", "–"))]
+        lines.append(f"| {row.setting} | {what} | " + " | ".join(cells + tail) + " |")
+        for c in COLUMNS:
+            x = ours(m, c)
+            csv_rows.append([ADAPT_TABLE, row.key, c, "" if x is None else f"{x:.6g}",
+                             "" if pv[c] is None else f"{pv[c]:g}"])
+        if m is not None:
+            csv_rows.append([ADAPT_TABLE, row.key, "limit_violations", str(m.get("limit_violations", "")), ""])
+    v = results.get("trueadapt_validation")
+    lines += ["", _validation_line(v)]
+    for r in v or []:
+        csv_rows.append([ADAPT_TABLE, f"validation/{r['mode']}", "limit_violations", str(r["violations"]["total"]),
+                         "0"])
+    return lines, csv_rows
+
+
+def latex(results: dict[str, Any]) -> list[str]:
+    """The table as a booktabs tabular, cells ``ours (paper)``."""
+    out = ["% TrueAdapt Table I: online adaptation of reference trajectories (ball in PyBullet)",
+           r"\begin{tabular}{l" + "r" * len(COLUMNS) + "}", r"\toprule",
+           "setting & " + " & ".join(c.replace("_", r"\_") for c in COLUMNS) + r" \\", r"\midrule"]
+    for row in ROWS:
+        m, pv = _row_values(results, row)
+        cells = [f"{_fmt(ours(m, c)).replace('–', '--')} ({_fmt(pv[c]).replace('–', '--')})" for c in COLUMNS]
+        out.append(row.key.replace("_", r"\_") + " & " + " & ".join(cells) + r" \\")
+    return [*out, r"\bottomrule", r"\end{tabular}", ""]

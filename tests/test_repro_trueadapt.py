@@ -1,0 +1,134 @@
+"""TrueAdapt Table I in the reproduction: the committed test splits, the limit counter, the row plan and the renderer
+(hand-checked cells)."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+
+import pytest
+import torch
+
+from pathrl.repro import trueadapt as adapt
+
+ROOT = Path(__file__).resolve().parents[1]
+REF = "iiwa7_trueadapt_on_plate_reference_in_pybullet"
+FAKE = {  # one on-plate row, one in-place row, the validation
+    "trueadapt": {
+        REF: {"success": 0.05, "fraction": 0.375, "offset": 0.0431, "acc": 0.0224, "jerk": 0.0028, "episodes": 1000,
+              "backend": "pybullet", "limit_violations": 0},
+        "iiwa7_trueadapt_in_place_tray_controller_in_pybullet": {
+            "success": 1.0, "fraction": 1.0, "offset": 0.0099, "acc": 0.038, "jerk": 0.0304, "episodes": 1000,
+            "backend": "pybullet", "limit_violations": 2},
+    },
+    "trueadapt_validation": [{"mode": "random", "trajectories": 100000, "steps": 100, "setpoints_checked": 840000000,
+                              "violations": {"total": 0}, "seconds": 104.4}],
+}
+
+
+def _line(md: list[str], setting: str) -> str:
+    return next(ln for ln in md if ln.startswith(f"| {setting} |"))
+
+
+def test_renderer_hand_checked_cells():
+    md, rows = adapt.markdown(FAKE)
+    # ours in percent / the paper's; on plate the error distance is not the task's metric: ours in brackets
+    assert _line(md, "on plate: reference trajectories (no adaptations)") == (
+        "| on plate: reference trajectories (no adaptations) | the reference replayed | **5.0** / 4.2 | "
+        "**37.5** / 40.4 | (4.3) | **2.2** / 1.7 | **0.3** / 0.5 | pybullet | 1000 | 0 |")
+    # a row of ours only (no paper value): bold, no slash; in place the error distance is the metric (cm)
+    assert _line(md, "in place: model-based tray controller") == (
+        "| in place: model-based tray controller | **tray controller: privileged information, not in the paper** | "
+        "**100.0** | **100.0** | **1.0** | **3.8** | **3.0** | pybullet | 1000 | 2 |")
+    # a paper row without a policy of ours: dashes and the paper's value
+    assert _line(md, "on plate: no jerk penalty") == (
+        "| on plate: no jerk penalty | not trained | – / 87.5 | – / 96.7 | – | – / 23.0 | – / 18.1 | – | – | – |")
+    assert any("random accelerations: 100000 trajectories x 100 steps, **0 violations** in 8.40e+08 (setpoint, joint) "
+               "pairs (104 s)" in ln for ln in md)
+    csv = {(r[1], r[2]): (r[3], r[4]) for r in rows}
+    assert csv["on_plate/reference", "success_pct"] == ("5", "4.2")
+    assert csv["in_place/test_set", "error_distance_cm"] == ("", "1.2")
+    assert csv["in_place/tray_controller", "limit_violations"] == ("2", "")
+    assert csv["validation/random", "limit_violations"] == ("0", "0")
+    tex = "\n".join(adapt.latex(FAKE))
+    assert r"on\_plate/reference & 5.0 (4.2) & 37.5 (40.4) & 4.3 (--)" in tex
+
+
+def test_missing_train_split_renders_as_not_available(tmp_path):
+    md, _ = adapt.markdown({"trueadapt": {}})
+    line = _line(md, "on plate: TrueAdapt, training set")
+    assert adapt.TRAIN_MISSING in line and line.endswith("| – / 90.7 | – / 97.9 | – | – / 7.0 | – / 3.7 | – | – | – |")
+    assert "Limit validation (Sec. VI-D): not run." in md
+    # the step is skipped (no failure) where data/ lacks the train split; the test rows still run
+    train = next(e for e in adapt.evaluations() if e.split == "train")
+    root = tmp_path / "checkout"
+    (root / "models" / train.model).mkdir(parents=True)
+    (root / "models" / train.model / "config.yaml").write_text("{}")
+    assert adapt.unavailable(train, root / "models", root / "data") == adapt.TRAIN_MISSING
+    assert adapt.eval_command(train, root, root / "results" / "raw", 1000) is None
+    test = dataclasses.replace(train, split="test", open_loop=True)
+    assert adapt.eval_command(test, root, root / "results" / "raw", 12) == [
+        "tools/trueadapt_eval.py", "--run", f"models/{train.model}", "--dataset", "datasets/iiwa7/trueadapt_on_plate",
+        "--split", "test", "--episodes", "12", "--seed", "0", "--backend", "pybullet", "--workers", "1", "--out",
+        f"results/raw/{train.model}_in_pybullet_open_loop", "--open-loop"]
+    (root / "results" / "raw" / test.id).mkdir(parents=True)
+    (root / "results" / "raw" / test.id / "metrics.json").write_text("{}")
+    assert adapt.eval_command(test, root, root / "results" / "raw", 12, reuse=True) is None
+
+
+def test_rows_cover_the_paper_and_name_shipped_models():
+    paper = adapt.paper()
+    assert {r.key for r in adapt.ROWS if r.in_paper} == set(paper["rows"])
+    assert all(len(v) == len(paper["columns"]) for v in paper["rows"].values())
+    for e in adapt.evaluations():
+        assert e.model is None or (ROOT / "models" / e.model / "config.yaml").is_file(), e.model
+    assert len({e.id for e in adapt.evaluations()}) == len(adapt.evaluations())
+    assert adapt.VALIDATION_ID in adapt.names() and "iiwa7_trueadapt_in_place_reference" in adapt.names()
+
+
+@pytest.mark.parametrize("task", ["on_plate", "in_place"])
+def test_committed_split_holds_the_1000_test_trajectories(task):
+    from pathrl.dataset.trueadapt import load_trajectories
+    from pathrl.robot.model import load_robot_by_name
+
+    path = ROOT / "datasets" / "iiwa7" / f"trueadapt_{task}"
+    meta = json.loads((path / "dataset.json").read_text())
+    assert meta["splits"] == {"test": 1000} and meta["kind"] == "trueadapt"
+    assert (path / "test.npz").stat().st_size < 8e6
+    assert load_trajectories(str(path), "test", load_robot_by_name("iiwa7"), 0.05).num == 1000
+
+
+def test_a_fresh_checkout_evaluates_on_the_committed_split(tmp_path, monkeypatch):
+    from pathrl.eval.evaluate import committed_split
+
+    (tmp_path / "datasets").symlink_to(ROOT / "datasets")
+    monkeypatch.chdir(tmp_path)  # no data/ here
+    assert committed_split("data/iiwa7/trueadapt_on_plate", "test") == "datasets/iiwa7/trueadapt_on_plate"
+    assert committed_split("data/iiwa7/trueadapt_on_plate", "train") == "data/iiwa7/trueadapt_on_plate"
+
+
+def test_limit_counter_checks_every_setpoint_and_finds_violations():
+    """The reference replayed on 4 committed trajectories: no violation of the robot's limits; against velocity
+    limits at 10 % (the references reach up to 50 %) the same setpoints violate."""
+    from pathrl.dataset.trueadapt import load_trajectories
+    from pathrl.envs.trueadapt import AdaptEnvCfg, TrueAdaptEnv
+    from pathrl.envs.trueadapt_rewards import build_adapt_reward
+    from pathrl.eval.trueadapt import evaluate, reference_policy
+    from pathrl.eval.trueadapt_limits import LimitCounter
+    from pathrl.robot.model import load_robot_by_name
+
+    robot = load_robot_by_name("iiwa7")
+    bank = load_trajectories(str(ROOT / "datasets/iiwa7/trueadapt_on_plate"), "test", robot, 0.05)
+    counts = []
+    for scale in (1.0, 0.1):
+        env = TrueAdaptEnv(AdaptEnvCfg(num_envs=4, autoreset=False, fail_terminates=False), robot, bank,
+                           build_adapt_reward({"on_plate": {"weight": 1.0}}))
+        lim = dataclasses.replace(env.limits, vel=env.limits.vel * scale)
+        counter = LimitCounter(env, lim)
+        evaluate(env, reference_policy, torch.arange(4), counter)
+        steps = int(bank.steps[:4].sum())
+        assert counter.checked == steps * 12 * 7  # 12 setpoints per 50 ms step at 240 Hz, 7 joints
+        counts.append(counter.counts)
+    assert counts[0]["total"] == 0
+    assert counts[1]["velocity"] > 0 and counts[1]["total"] == counts[1]["velocity"]
