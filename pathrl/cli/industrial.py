@@ -5,6 +5,8 @@
     pathrl-industrial sweep  [key=value ...]   baseline max error over sweep_speeds -> out_sweep
     pathrl-industrial train  [key=value ...]   TD3 + PER policy -> run_dir (resume=true continues it)
     pathrl-industrial table4 [key=value ...]   the policies of table4_runs (ablations) -> out_table4
+    pathrl-industrial validate [key=value ...] seed_runs on validation curves of the training family -> out_validation
+    pathrl-industrial timing policy=RUN_DIR    per-iteration execution / decision times, t_opt model -> out_timing
     pathrl-industrial record traj=ROW method=mpgd|rl [policy=RUN_DIR] out=DIR [key=value ...]
                                                one row's optimisation, every execution -> DIR/industrial.mcap
                                                (``pathrl-view DIR`` shows it)
@@ -28,8 +30,8 @@ import numpy as np
 from pathrl.cli.common import UserError, compose, run_cli, to_container
 from pathrl.storage import atomic_write
 
-COMMANDS = ("table2", "speed", "sweep", "train", "table4", "record")
-USAGE = "usage: pathrl-industrial {table2,speed,sweep,train,table4,record} [key=value ...]"
+COMMANDS = ("table2", "speed", "sweep", "train", "table4", "record", "validate", "timing")
+USAGE = "usage: pathrl-industrial {table2,speed,sweep,train,table4,record,validate,timing} [key=value ...]"
 #: keys of ``record`` only (not config keys)
 RECORD_KEYS = ("traj", "method", "out")
 
@@ -119,6 +121,8 @@ def _main(argv: list[str]) -> None:
             rows = experiments.run_table2(targets, controller, mpgd, cfg["waypoints"], cfg["zone"], cfg["seed"],
                                           policy, rl.k_max)
             text = tables.table2_markdown(rows, command, note, name)
+            if policy is not None and cfg["seed_runs"]:
+                text += _seed_summary(cfg, targets, controller, rl.k_max, rows)
             out = cfg["out_table2"]
         elif cmd == "speed":
             policy, name = _policy(cfg["policy"])
@@ -127,13 +131,11 @@ def _main(argv: list[str]) -> None:
             text = tables.table3_markdown(rows, command, note, name if policy is not None else "MPGD")
             out = cfg["out_speed"]
         elif cmd == "table4":
-            pairs = [str(entry).split("=", 1) for entry in cfg["table4_runs"]]
-            if not pairs or any(len(p) != 2 for p in pairs):
-                raise UserError("table4: table4_runs must be a non-empty list of NAME=RUN_DIR entries")
-            policies = {name: _policy(run)[0] for name, run in pairs}
-            results = experiments.run_table4(targets, controller, policies, cfg["waypoints"], cfg["zone"], rl.k_max)
-            text = tables.table4_markdown(results, command, note)
-            out = cfg["out_table4"]
+            text, out = _table4(cfg, targets, controller, rl.k_max, command, note), cfg["out_table4"]
+        elif cmd == "validate":
+            text, out = _validate(cfg, controller, rl.k_max, command), cfg["out_validation"]
+        elif cmd == "timing":
+            text, out = _timing(cfg, targets, controller, mpgd, rl.k_max, command), cfg["out_timing"]
         else:
             speeds = [float(v) for v in cfg["sweep_speeds"]]
             errs = experiments.baseline_sweep(targets, speeds, controller, cfg["waypoints"], cfg["zone"])
@@ -144,6 +146,68 @@ def _main(argv: list[str]) -> None:
     print(text)
     _write(out, text)
     print(f"{cmd} took {time.perf_counter() - t0:.1f} s")
+
+
+def _seed_summary(cfg, targets, controller, k_max: int, mpgd_rows) -> str:
+    """The per-seed lines of ``seed_runs`` on the Table II rows, with mean and min-max over the seeds."""
+    from pathrl.industrial import seeds
+
+    summaries = [seeds.summarise(run, seeds.run_policy_rows(targets, _policy(run)[0], controller, cfg["waypoints"],
+                                                          cfg["zone"], k_max), mpgd_rows) for run in cfg["seed_runs"]]
+    return "\n".join([
+        "## Seeds of the policy's configuration", "",
+        "The RL columns above are one shipped policy; every seed of its configuration (`seed_runs`) on the same "
+        "rows, against the same MPGD runs (ratios summed over the rows both reach; t_opt is wall time):", "",
+        *seeds.seed_table_markdown({"TD3 + PER": summaries}), ""])
+
+
+def _table4(cfg, targets, controller, k_max: int, command: str, note: str) -> str:
+    """Table IV: per row the first run of each variant; then every run's summary and mean / min-max per variant."""
+    from pathrl.industrial import seeds, tables
+
+    try:
+        variants = seeds.parse_runs(cfg["table4_runs"])
+    except ValueError as exc:
+        raise UserError(f"table4_runs: {exc}") from None
+    runs = {run: _policy(run)[0] for dirs in variants.values() for run in dirs}
+    results = {run: seeds.run_policy_rows(targets, policy, controller, cfg["waypoints"], cfg["zone"], k_max)
+               for run, policy in runs.items()}
+    first = {name: [(r.name, r.err_mm, r.itr) for r in results[dirs[0]]] for name, dirs in variants.items()}
+    text = tables.table4_markdown(first, command, note)
+    summaries = {name: [seeds.summarise(run, results[run]) for run in dirs] for name, dirs in variants.items()}
+    return "\n".join([
+        text, "## Seeds per variant", "",
+        "The per-row columns above are each variant's first run; all its runs (seeds) below, with mean and min-max "
+        "over them:", "", *seeds.seed_table_markdown(summaries, with_ratios=False), ""])
+
+
+def _validate(cfg, controller, k_max: int, command: str) -> str:
+    """Score the ``seed_runs`` on the validation set (:mod:`pathrl.industrial.seeds`)."""
+    from pathrl.industrial import seeds
+
+    if not cfg["seed_runs"]:
+        raise UserError("validate: seed_runs is empty (give the run dirs to compare)")
+    try:
+        targets = seeds.validation_targets(int(cfg["validation_n"]), int(cfg["validation_seed"]))
+    except ValueError as exc:
+        raise UserError(str(exc)) from None
+    results = {run: seeds.run_policy_rows(targets, _policy(run)[0], controller, cfg["waypoints"], cfg["zone"], k_max)
+               for run in cfg["seed_runs"]}
+    return seeds.validation_markdown(results, k_max, command, int(cfg["validation_n"]), int(cfg["validation_seed"]))
+
+
+def _timing(cfg, targets, controller, mpgd, k_max: int, command: str) -> str:
+    """Per-iteration times of execution, measurement, MPGD and policy decisions, and the t_opt cost model."""
+    import torch
+
+    from pathrl.industrial import timing
+
+    if not cfg["policy"]:
+        raise UserError("timing: needs policy=RUN_DIR (the policy whose decisions are timed)")
+    torch.set_num_threads(1)
+    policy = _policy(cfg["policy"])[0]
+    rows = timing.time_rows(targets, controller, mpgd, policy, cfg["waypoints"], cfg["zone"], k_max, cfg["seed"])
+    return timing.timing_markdown(rows, command)
 
 
 def _record_keys(argv: Sequence[str]) -> tuple[dict[str, str], list[str]]:

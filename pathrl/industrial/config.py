@@ -18,7 +18,10 @@ class IndustrialAppCfg:
     sweep (mm/s), output files (relative to the working directory) and the seed; for the learned policy the TD3
 settings, the training run directory, whether to resume it, and the run directory whose newest checkpoint
 ``table2`` evaluates beside MPGD (empty: no RL columns); ``table4`` evaluates the run directories of
-``table4_runs`` (``NAME=RUN_DIR`` entries)."""
+``table4_runs`` (``NAME=RUN_DIR[,RUN_DIR...]`` entries: several run dirs are seeds of one variant, summarised as
+mean and min-max); ``seed_runs`` are the run dirs of the seeds of the main configuration (``table2`` with a policy
+adds their per-seed summary, ``validate`` scores them on ``validation_n`` training-family curves drawn with
+``validation_seed``, :mod:`pathrl.industrial.seeds`); ``timing`` writes where t_opt goes to ``out_timing``."""
 
     controller: ControllerParams = field(default_factory=ControllerParams)
     mpgd: MPGDParams = field(default_factory=MPGDParams)
@@ -29,6 +32,11 @@ settings, the training run directory, whether to resume it, and the run director
     policy: str = ""
     table4_runs: list[str] = field(default_factory=list)
     out_table4: str = "results/industrial_table4.md"
+    seed_runs: list[str] = field(default_factory=list)
+    validation_n: int = 30
+    validation_seed: int = 0
+    out_validation: str = "results/industrial_validation.md"
+    out_timing: str = "results/industrial_timing.md"
     rows: list[str] = field(default_factory=list)
     waypoints: int = 100
     zone: float = 10.0
