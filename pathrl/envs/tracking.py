@@ -234,6 +234,9 @@ class PathTrackingEnv(_VecEnvBase):
         #: (N,) bool or None (all): envs whose feedback is simulated. Evaluation rollouts clear the envs whose
         #: episode has ended: their physics would be wasted work (most of an evaluation in PyBullet).
         self.simulated: Tensor | None = None
+        #: New episodes start on the first `sample_paths` paths of the bank (None: all); path changes during training
+        #: (pathrl.envs.path_changes) keep their branches in rows behind them.
+        self.sample_paths: int | None = None
         self.reset()
 
     # ------------------------------------------------------------------ episode management
@@ -278,7 +281,8 @@ class PathTrackingEnv(_VecEnvBase):
     def _reset_envs(self, env_ids: Tensor, refresh: bool = True) -> None:
         if len(env_ids) == 0:
             return
-        idx = torch.randint(self.paths.num_paths, (len(env_ids),), generator=self.generator, device=self.device)
+        n_paths = self.paths.num_paths if self.sample_paths is None else self.sample_paths
+        idx = torch.randint(n_paths, (len(env_ids),), generator=self.generator, device=self.device)
         if self.cfg.segments == "full":
             seg = full_segments(self.paths, idx)
         else:

@@ -35,6 +35,9 @@ from pathrl.limits.check import limit_violations
 from pathrl.limits.feasible import JointLimits
 from pathrl.paths.spline import knot_arc_lengths
 
+__all__ = ["OFFSET_RAD", "RAMP_RAD", "SWITCH_RANGE", "VARIANTS", "SwitchEpisode", "branch", "excess_vs_control", "main",
+           "paired_settle", "path_change_episodes", "settle_vs_control", "summarize", "toppra_replan", "tracking_level"]
+
 #: Defaults of the protocol: switch time (s), offset of the branch (rad, joint space), its ramp (rad of arc).
 SWITCH_RANGE = (1.0, 4.0)
 OFFSET_RAD = 0.3
