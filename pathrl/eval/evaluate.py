@@ -16,6 +16,7 @@ from rsl_rl.models import MLPModel
 from tensordict import TensorDict
 
 from pathrl.baselines.controllers import make_controller
+from pathrl.config.migrate import migrate
 from pathrl.dataset.io import load_pathset
 from pathrl.envs.factory import task_cfg
 from pathrl.envs.registry import EVAL_ENV, make_env
@@ -43,6 +44,7 @@ from pathrl.paths.knots import KnotStrategy
 from pathrl.paths.segments import evaluation_plan
 from pathrl.policy import MixedPrecisionMLPModel, policy_role
 from pathrl.policy.residual import BASE_GROUP, ResidualPolicy, check_residual_cfg
+from pathrl.policy.widen import LayoutError, actor_for_joints
 from pathrl.robot.kinematics import ForwardKinematics
 from pathrl.robot.model import RobotSpec, load_robot
 from pathrl.storage import CheckpointError, latest_checkpoint, load_checkpoint, write_json_atomic
@@ -68,7 +70,7 @@ def committed_split(path: str, split: str) -> str:
 
 
 def load_run(run_dir: Path) -> tuple[dict[str, Any], Path | None, dict[str, Any]]:
-    """(resolved config, checkpoint path, training summary) of a run or model directory.
+    """(resolved config in the current layout, checkpoint path, training summary) of a run or model directory.
 
     A model-based controller's directory (``controller:`` in its config) has no checkpoint (None)."""
     run_dir = Path(run_dir)
@@ -83,6 +85,10 @@ def load_run(run_dir: Path) -> tuple[dict[str, Any], Path | None, dict[str, Any]
         raise RunError(f"{cfg_path}: invalid YAML ({str(exc).splitlines()[0]})") from None
     if not isinstance(cfg, dict):
         raise RunError(f"{cfg_path}: expected a mapping of config groups, got {type(cfg).__name__}")
+    try:
+        cfg = migrate(cfg)  # saved by older code: the keys added since, at the values those runs used
+    except ValueError as exc:
+        raise RunError(f"{cfg_path}: {exc}") from None
     ckpt = run_dir / "model.pt"
     if not ckpt.is_file():
         ckpt = latest_checkpoint(run_dir)
@@ -135,11 +141,26 @@ def _load_network(cfg: dict[str, Any], env: PathTrackingEnv, ckpt: Path, obs: Te
         raise RunError(str(exc)) from None
     try:
         model = cls(obs, groups, role, env.num_actions, **spec)
-        model.load_state_dict(state[f"{role}_state_dict"])
-    except (RuntimeError, KeyError, TypeError) as exc:
+        model.load_state_dict(_onto_robot(cfg, env, dict(state[f"{role}_state_dict"]), model))
+    except (RuntimeError, KeyError, TypeError, LayoutError) as exc:
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         raise RunError(f"{ckpt}: the checkpoint does not fit the run's policy ({first[:200]})") from None
     return model.to(env.device).eval()
+
+
+def _onto_robot(cfg: dict[str, Any], env: PathTrackingEnv, state: dict[str, torch.Tensor],
+                model: torch.nn.Module) -> dict[str, torch.Tensor]:
+    """`state` as is, or, for a policy trained on a robot with fewer joints and the same path joints than `env`'s
+    (the fixed-base ARMAR-4 upper body on the standing robot), moved onto `env`'s joints: the extra joints' actions
+    are 0 (:func:`pathrl.policy.widen.actor_for_joints`)."""
+    src = list((cfg.get("robot") or {}).get("joints") or [])
+    joints, path_joints = list(env.robot.joints), list((cfg.get("robot") or {}).get("path_joints") or [])
+    if not src or src == joints:
+        return state
+    if path_joints != [joints[i] for i in env.path_index.tolist()]:
+        raise LayoutError(f"the policy's path joints {path_joints} are not the env's")
+    num_obs = int(model.state_dict()["mlp.0.weight"].shape[1])
+    return actor_for_joints(state, src, joints, num_obs)
 
 
 def evaluate(

@@ -11,19 +11,20 @@ source, with the new joints held still.
 
 from __future__ import annotations
 
-import re
 from collections.abc import Sequence
 from pathlib import Path
 
 import torch
 import yaml
-from torch import Tensor
 
+from pathrl.policy.widen import LayoutError, actor_for_joints, input_columns, joint_rows, widen_inputs, widen_outputs
 from pathrl.storage import CheckpointError, latest_valid_checkpoint, load_checkpoint
 
+__all__ = ["WarmStartError", "input_columns", "joint_rows", "source_checkpoint", "source_joints", "warm_start",
+           "widen_inputs", "widen_outputs"]
 
-class WarmStartError(ValueError):
-    """The warm-start source is missing or does not fit the new run."""
+#: The warm-start source is missing or does not fit the new run (the layout functions raise it too).
+WarmStartError = LayoutError
 
 
 def source_checkpoint(path: str | Path) -> Path:
@@ -37,63 +38,6 @@ def source_checkpoint(path: str | Path) -> Path:
     if ckpt is None:
         raise WarmStartError(f"init_from={path}: no model.pt or model_<iteration>.pt there")
     return ckpt
-
-
-def joint_rows(src_joints: Sequence[str], joints: Sequence[str]) -> Tensor:
-    """(D_src,) index of every source joint among the new robot's `joints`."""
-    missing = [j for j in src_joints if j not in joints]
-    if missing:
-        raise WarmStartError(f"the source policy controls joints the new robot lacks: {missing}")
-    return torch.tensor([list(joints).index(j) for j in src_joints])
-
-
-def input_columns(rows: Tensor, d: int, src_obs: int, num_obs: int) -> Tensor:
-    """(src_obs,) column in the new state of every source input, the source joints at `rows` of `d` joints.
-
-    The state starts with three per-joint blocks (position, velocity, acceleration; D columns each); what
-    follows depends on the path joints only and keeps its order; new task inputs come last.
-    """
-    d_src = len(rows)
-    rest = src_obs - 3 * d_src
-    if rest < 0 or 3 * d + rest > num_obs:
-        raise WarmStartError(f"source policy has {src_obs} inputs for {d_src} joints; the new env has "
-                             f"{num_obs} for {d}: the states do not line up")
-    return torch.cat([*(b * d + rows for b in range(3)), 3 * d + torch.arange(rest)])
-
-
-def widen_inputs(state: dict[str, Tensor], num_obs: int, columns: Tensor | None = None) -> dict[str, Tensor]:
-    """An MLPModel state dict with `num_obs` inputs: source input i moves to `columns[i]` (default: i, new inputs
-    appended); new inputs get zero weights in mlp.0 and the obs normalizer at mean 0 / std 1."""
-    w = state["mlp.0.weight"]
-    if columns is None:
-        if num_obs < w.shape[1]:
-            raise WarmStartError(f"source policy has {w.shape[1]} inputs, the new env only {num_obs}")
-        columns = torch.arange(w.shape[1])
-    out = dict(state)
-    out["mlp.0.weight"] = w.new_zeros(w.shape[0], num_obs)
-    out["mlp.0.weight"][:, columns] = w
-    for key, fill in (("obs_normalizer._mean", 0.0), ("obs_normalizer._var", 1.0), ("obs_normalizer._std", 1.0)):
-        if key in state:
-            v = state[key]
-            out[key] = v.new_full((*v.shape[:-1], num_obs), fill)
-            out[key][..., columns] = v
-    return out
-
-
-def widen_outputs(state: dict[str, Tensor], rows: Tensor, num_out: int, std: float | None) -> dict[str, Tensor]:
-    """An MLPModel actor state dict with `num_out` actions: source action i moves to `rows[i]`; new actions get
-    zero weights and bias in the last layer (mean action 0) and the action std `std` (or the mean source std)."""
-    last = max(int(m.group(1)) for k in state if (m := re.fullmatch(r"mlp\.(\d+)\.weight", k)))
-    out = dict(state)
-    for key in (f"mlp.{last}.weight", f"mlp.{last}.bias"):
-        v = state[key]
-        out[key] = v.new_zeros(num_out, *v.shape[1:])
-        out[key][rows] = v
-    if "distribution.std_param" in state:
-        v = state["distribution.std_param"]
-        out["distribution.std_param"] = v.new_full((num_out,), float(std) if std is not None else float(v.mean()))
-        out["distribution.std_param"][rows] = v
-    return out
 
 
 def source_joints(ckpt: Path) -> tuple[list[str], list[str]] | None:
@@ -133,9 +77,8 @@ def warm_start(alg, source: str | Path, num_obs: int, init_std: float | None = N
             raise WarmStartError(f"init_from={source}: a distilled student must have the new robot's joints")
         if path_joints is not None and list(src[1]) != list(path_joints):
             raise WarmStartError(f"init_from={source}: path joints differ ({src[1]} vs {list(path_joints)})")
-        rows = joint_rows(src[0], joints)
-        cols = input_columns(rows, len(joints), actor["mlp.0.weight"].shape[1], num_obs)
-        actor = widen_outputs(widen_inputs(actor, num_obs, cols), rows, len(joints), init_std)
+        cols = input_columns(joint_rows(src[0], joints), len(joints), actor["mlp.0.weight"].shape[1], num_obs)
+        actor = actor_for_joints(actor, src[0], joints, num_obs, init_std)
         critic = widen_inputs(critic, num_obs, cols)
     else:
         actor = widen_inputs(actor, num_obs)
