@@ -15,12 +15,14 @@ import torch
 import yaml
 from rsl_rl.runners import DistillationRunner, OnPolicyRunner
 
-from pathrl.envs.factory import ADDED_KEYS, NO_TASK
+from pathrl.config.migrate import migrate
+from pathrl.envs.path_changes import with_path_changes
 from pathrl.envs.registry import make_env
 from pathrl.envs.state import restore, snapshot, snapshot_is_exact, unwrapped
 from pathrl.envs.tracking import PathTrackingEnv
 from pathrl.limits import kernels
 from pathrl.policy import policy_role
+from pathrl.policy.models import MixedMLP
 from pathrl.policy.residual import ControllerObs, ResidualEnv, check_residual_cfg, zero_last_layer
 from pathrl.storage import (
     CheckpointError,
@@ -81,6 +83,21 @@ class PathRLRunner(OnPolicyRunner):
         def apply(it: int) -> None:
             dist.std_range[1] = max(std_cap(it, total, init_std, final, start), dist.std_range[0])
             dist.log_std_range[1] = math.log(dist.std_range[1])
+
+        apply(self.current_learning_iteration)
+        self.after_each_update(apply)
+
+    def set_float32_from(self, iteration: int) -> None:
+        """From iteration `iteration` on (counted from 0, so a resume continues the count) the hidden layers of a
+        bfloat16 actor and critic (:class:`~pathrl.policy.models.MixedPrecisionMLPModel`) compute in float32: the
+        fast precision while the policy explores, the exact one while the action noise is annealed."""
+        models = (getattr(self.alg, "actor", None), getattr(self.alg, "critic", None))
+        mlps = [m.mlp for m in models if isinstance(getattr(m, "mlp", None), MixedMLP)]
+
+        def apply(it: int) -> None:
+            if it >= iteration:
+                for mlp in mlps:
+                    mlp.dtype = torch.float32
 
         apply(self.current_learning_iteration)
         self.after_each_update(apply)
@@ -211,6 +228,8 @@ def check_run_cfg(cfg: dict[str, Any]) -> None:
     for key in ("num_steps_per_env", "save_interval"):
         if key in cfg["agent"] and int(cfg["agent"][key]) < 1:
             raise ValueError(f"agent.{key} must be >= 1, got {cfg['agent'][key]}")
+    if cfg.get("float32_from") is not None:
+        float32_iteration(cfg["float32_from"], int(cfg["iterations"]))
 
 
 def train(cfg: dict[str, Any], run_dir: Path, resume: bool = False) -> dict[str, Any]:
@@ -225,13 +244,11 @@ def train(cfg: dict[str, Any], run_dir: Path, resume: bool = False) -> dict[str,
     if ckpt is None:
         clean_leftovers(run_dir)
     if ckpt is not None and (run_dir / "config.yaml").exists():
-        saved = yaml.safe_load((run_dir / "config.yaml").read_text())
-        saved.setdefault("task", NO_TASK)  # runs from before tasks / warm starts existed
-        saved.setdefault("init_from", None)
-        diff = _config_diff(saved, cfg, ignore={"resume", "iterations", "compile_limits"})
+        diff = config_change(yaml.safe_load((run_dir / "config.yaml").read_text()), cfg)
         if diff:
             raise ValueError(f"resume with a different config ({diff}); use the same overrides or a new run_dir")
     env = make_env(cfg, "train")  # bad values and data fail here, before anything is written into run_dir
+    env = with_path_changes(cfg, env)  # path_change group (pathrl.envs.path_changes); absent or off: env itself
     distill = cfg["agent"]["algorithm"]["class_name"] == "Distillation"
     if distill:
         env = _with_teacher(cfg, env)
@@ -267,6 +284,8 @@ def train(cfg: dict[str, Any], run_dir: Path, resume: bool = False) -> dict[str,
     anneal = cfg.get("std_anneal")
     if anneal:
         runner.set_std_schedule(total, _init_std(cfg), float(anneal["final"]), float(anneal["start"]))
+    if cfg.get("float32_from") is not None:
+        runner.set_float32_from(float32_iteration(cfg["float32_from"], total))
     remaining = max(total - done_before, 0)
     runner.track_wall_time(run_dir / "summary.json", float(prev.get("wall_time_s", 0.0)))
     if loaded is not None and not runner.restore_streams(loaded):
@@ -292,6 +311,18 @@ def train(cfg: dict[str, Any], run_dir: Path, resume: bool = False) -> dict[str,
     }
     write_json_atomic(run_dir / "summary.json", summary)
     return summary
+
+
+def float32_iteration(fraction: Any, total: int) -> int:
+    """The iteration at which ``float32_from`` (a fraction of the run's `total` iterations) switches the hidden
+    layers to float32; ValueError outside [0, 1]."""
+    try:
+        f = float(fraction)
+    except (TypeError, ValueError):
+        f = math.nan
+    if not 0.0 <= f <= 1.0:
+        raise ValueError(f"float32_from must be a fraction of the iterations in [0, 1] or null, got {fraction!r}")
+    return int(math.ceil(f * total))
 
 
 def _init_std(cfg: dict[str, Any]) -> float:
@@ -323,13 +354,21 @@ def _with_base(cfg: dict[str, Any], env: PathTrackingEnv) -> ResidualEnv:
     return ResidualEnv(env, make_controller(spec, env), scale)
 
 
+#: Top-level keys a resume may change.
+RESUME_MAY_CHANGE = frozenset({"resume", "iterations", "compile_limits"})
+
+
+def config_change(saved: dict[str, Any], cfg: dict[str, Any]) -> str:
+    """The first difference (``key: saved != now``) between a run's saved config and the config it is resumed with,
+    both in the current layout (:func:`pathrl.config.migrate.migrate`: a key added after the run was saved counts
+    as its old behaviour); "" when they agree up to :data:`RESUME_MAY_CHANGE`."""
+    return _config_diff(migrate(saved), migrate(cfg), ignore=set(RESUME_MAY_CHANGE))
+
+
 def _config_diff(a: Any, b: Any, ignore: set[str], prefix: str = "") -> str:
     if isinstance(a, dict) and isinstance(b, dict):
         for k in sorted(set(a) | set(b)):
             if not prefix and k in ignore:
-                continue
-            key = f"{prefix}{k}"
-            if k not in a and key in ADDED_KEYS and b[k] == ADDED_KEYS[key]:
                 continue
             d = _config_diff(a.get(k), b.get(k), ignore, f"{prefix}{k}.")
             if d:
