@@ -230,7 +230,10 @@ WARM_STARTS = {"iiwa7_ball_balancing_reward": "iiwa7_ball_balancing",
                "armar4_legs_target_point_balancing": "armar4_target_point",
                "iiwa7_random_continue": "iiwa7_random",
                "armar6_random_continue": "armar6_random",
-               "armar4_target_point_continue": "armar4_target_point"}
+               "armar4_target_point_continue": "armar4_target_point",
+               "armar4_target_point_fast": "armar4_target_point_continue",
+               "armar4_target_point_fast_continue": "armar4_target_point_fast",
+               "iiwa7_random_path_change": "iiwa7_random_continue"}
 
 
 def warm_chain(model: str) -> list[str]:
