@@ -6,7 +6,7 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 export OMP_NUM_THREADS ?= 1
 
-.PHONY: setup test lint bench reproduce-tables datasets view-demo clean
+.PHONY: setup test lint bench reproduce-tables table datasets view-demo clean
 
 setup: $(STAMP)
 
@@ -32,6 +32,13 @@ bench: setup
 
 reproduce-tables: setup
 	$(PY) tools/reproduce_tables.py $(if $(PROFILE),--profile $(PROFILE)) $(if $(TRAIN),--train) $(if $(JOBS),--jobs $(JOBS))
+
+# One table: `make table T=II` evaluates the rows of sweeps/table_II.yaml (T=table_II and T=greedy_follower work too)
+# and renders every table into results/, the others from the results already there.
+table: setup
+	@test -n "$(T)" || { echo "usage: make table T=II (a table of sweeps/: $$(ls sweeps | sed 's/\.yaml//' | xargs))" >&2; exit 2; }
+	$(PY) tools/reproduce_tables.py --only $(if $(wildcard sweeps/$(T).yaml),$(T),table_$(T)) \
+		$(if $(PROFILE),--profile $(PROFILE)) $(if $(TRAIN),--train) $(if $(JOBS),--jobs $(JOBS)) $(if $(REUSE),--reuse)
 
 view-demo: setup
 	tools/view_demo.sh

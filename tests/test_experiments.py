@@ -11,10 +11,10 @@ from hydra import compose, initialize_config_dir
 
 from pathrl.cli.common import CONF_DIR
 from pathrl.cli.store import register
+from pathrl.repro.tables import SWEEPS as TABLES
 
 EXPERIMENTS = sorted(p.stem for p in (CONF_DIR / "experiment").glob("*.yaml"))
-SWEEPS = sorted(p.stem for p in (CONF_DIR / "sweep").glob("*.yaml"))
-ROOT = Path(__file__).resolve().parents[1]
+SWEEPS = sorted(name for name, spec in TABLES.items() if spec.train)  # sweeps/<table>.yaml with a train list
 BIN = Path(__import__("sys").executable).parent
 
 
@@ -52,6 +52,7 @@ def test_experiment_values():
 def test_sweep_composes_with_existing_experiments(name):
     cfg = _compose([f"+sweep={name}"], hydra_cfg=True)
     exps = cfg.hydra.sweeper.params["+experiment"].split(",")
+    assert tuple(exps) == TABLES[name].train  # the sweep runs the experiments of sweeps/<name>.yaml
     assert set(exps) <= set(EXPERIMENTS) and len(exps) >= 3
     assert cfg.hydra.launcher._target_.endswith("JoblibLauncher")
     assert cfg.hydra.launcher.n_jobs * cfg.threads <= 2  # respects the 2-core machine
@@ -101,10 +102,10 @@ def test_multirun_failing_job_does_not_stop_the_others(launcher, tmp_path, tiny_
 
 
 def test_warm_starts_match_the_experiments():
+    """WARM_STARTS, read from the experiment files without Hydra, is what Hydra composes (defaults included)."""
     from pathrl.repro.tables import WARM_STARTS
 
-    for model, source in WARM_STARTS.items():
-        assert _compose([f"+experiment={model}"]).init_from == f"models/{source}"
-    for path in sorted((ROOT / "conf" / "experiment").glob("*.yaml")):  # and every warm start is listed
-        if "init_from" in path.read_text():
-            assert path.stem in WARM_STARTS, path.stem
+    assert len(WARM_STARTS) >= 14
+    for name in EXPERIMENTS:  # both ways: every warm start, and no init_from on the others
+        expected = f"models/{WARM_STARTS[name]}" if name in WARM_STARTS else None
+        assert _compose([f"+experiment={name}"]).init_from == expected, name

@@ -87,3 +87,20 @@ def test_installed_copy_trains_and_evaluates_outside_checkout(installed, tmp_pat
         "out=results/tiny_eval", "segments=full")
     metrics = json.loads((work / "results" / "tiny_eval" / "metrics.json").read_text())
     assert metrics["episodes"] == 4 and len(metrics["per_episode"]) == 4 and metrics["limit_violations"] == 0
+
+
+def test_installed_copy_reads_the_table_rows(installed, tmp_path):
+    """pathrl.repro.tables reads its rows from the installed sweeps/ (package data), and a table's sweep composes."""
+    env = dict(os.environ, PYTHONPATH=str(installed), OMP_NUM_THREADS="1")
+    code = ("import pathrl.repro.tables as t; print(t.SWEEPS_DIR); print(len(t.ROWS), len(t.WARM_STARTS), "
+            "','.join(t.SWEEPS['table_II'].train))")
+    r = subprocess.run([PY, "-c", code], capture_output=True, text=True, cwd=tmp_path, env=env, timeout=120)
+    assert r.returncode == 0, r.stderr[-3000:]
+    from pathrl.repro.tables import ROWS, SWEEPS, WARM_STARTS  # the checkout's, for comparison
+
+    assert r.stdout.splitlines() == [str(installed / "pathrl" / "sweeps"),
+                                     f"{len(ROWS)} {len(WARM_STARTS)} {','.join(SWEEPS['table_II'].train)}"]
+    out = subprocess.run([str(installed / "bin" / "pathrl-train"), "+sweep=table_II", "--cfg", "hydra",
+                          "--package", "hydra.sweeper"], capture_output=True, text=True, cwd=tmp_path, env=env,
+                         timeout=120)
+    assert out.returncode == 0 and "iiwa7_random_length_lt_deviation" in out.stdout, out.stderr[-3000:]

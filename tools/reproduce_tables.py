@@ -6,6 +6,8 @@ results/tables.md, tables.csv, tables.tex, figures/*.png, raw/<evaluation>/metri
 each step's console output goes to results/logs/<step>.log. The TrueAdapt paper's Table I (pathrl/repro/trueadapt.py):
 its shipped policies and controllers on the committed test splits, the ball in PyBullet, and the 10^5-trajectory
 limit validation (raw/trueadapt_validation.json); --only takes their names too (e.g. trueadapt_validation).
+The rows are sweeps/<table>.yaml (pathrl/repro/sweeps.py); --only also takes a table's file name (`make table
+T=II` is --only table_II): its rows are evaluated, every table is rendered from the results in --out.
 
 Profiles:
   full   1200 paper segments per evaluation on the committed test splits (datasets/), policies from models/.
@@ -37,21 +39,28 @@ import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-from pathrl.repro import trueadapt as adapt  # noqa: E402
-from pathrl.repro.figures import CURVES, learning_curves, pareto_table_ii, path_overlay  # noqa: E402
-from pathrl.repro.render import render_latex, render_markdown  # noqa: E402
-from pathrl.repro.tables import (  # noqa: E402
-    CONTROLLER_MODELS,
-    PATH_CHANGE,
-    REALTIME,
-    ROWS,
-    WARM_STARTS,
-    Baseline,
-    Evaluation,
-    baselines,
-    evaluations,
-    warm_chain,
-)
+from pathrl.repro.sweeps import SweepsError  # noqa: E402
+
+try:  # the rows are read from sweeps/<table>.yaml at import: a broken file is its one-line error
+    from pathrl.repro import trueadapt as adapt
+    from pathrl.repro.figures import CURVES, learning_curves, pareto_table_ii, path_overlay
+    from pathrl.repro.render import render_latex, render_markdown
+    from pathrl.repro.tables import (
+        CONTROLLER_MODELS,
+        PATH_CHANGE,
+        REALTIME,
+        ROWS,
+        SWEEPS,
+        WARM_STARTS,
+        Baseline,
+        Evaluation,
+        baselines,
+        evaluations,
+        select,
+        warm_chain,
+    )
+except SweepsError as exc:
+    sys.exit(f"error: {exc}")
 from pathrl.storage import atomic_write  # noqa: E402
 from pathrl.train.ship import read_curve  # noqa: E402
 
@@ -143,7 +152,7 @@ def sh(cmd: list[str], log: Path) -> None:
 
 def build_plan(args: argparse.Namespace, profile: Profile, lay: Layout) -> Plan:
     only = set(args.only.split(",")) if args.only else None
-    rows = tuple(r for r in ROWS if only is None or r.evaluation.model in only)
+    rows = select(only)
     evals, bases = evaluations(rows), baselines(rows)
     logs = lay.out / "logs"
     plan = Plan()
@@ -424,7 +433,8 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--profile", choices=sorted(PROFILES), default="full")
     ap.add_argument("--train", action="store_true", help="train (resume) every policy first, then ship it")
-    ap.add_argument("--only", default="", help="comma-separated model names: only their rows")
+    ap.add_argument("--only", default="", help="comma-separated model or sweeps/ table names (table_II): only their "
+                    "rows (the other tables render from the results already in --out)")
     ap.add_argument("--reuse", action="store_true", help="keep evaluation / TOPP-RA results already in --out")
     ap.add_argument("--out", default=None, help="output dir (default results/, quick: results/quick/)")
     ap.add_argument("--jobs", type=int, default=min(os.cpu_count() or 1, 8),
@@ -434,10 +444,10 @@ def main() -> None:
     if args.jobs < 1:
         sys.exit(f"error: --jobs must be >= 1, got {args.jobs}")
     out = Path(args.out) if args.out else ROOT / ("results" if profile.name == "full" else "results/quick")
-    known = {r.evaluation.model for r in ROWS} | adapt.names()
+    known = {r.evaluation.model for r in ROWS} | adapt.names() | set(SWEEPS)
     unknown = set(filter(None, args.only.split(","))) - known
     if unknown:
-        sys.exit(f"error: --only: unknown model(s) {sorted(unknown)}; known: {sorted(known)}")
+        sys.exit(f"error: --only: unknown model or table(s) {sorted(unknown)}; known: {sorted(known)}")
     lay = Layout.of(profile, out.resolve(), args.train)
     plan = build_plan(args, profile, lay)
 

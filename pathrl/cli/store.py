@@ -7,6 +7,15 @@ from omegaconf import DictConfig, OmegaConf
 
 from pathrl.config import schema
 
+#: Every training sweep's settings besides its experiments: joblib, 2 jobs (conf/hydra/launcher/local.yaml) of one
+#: torch thread each (n_jobs x threads = the 2 cores of the reference machine).
+SWEEP_SETTINGS = {"defaults": [{"override /hydra/launcher": "local"}], "threads": 1}
+
+
+def sweep_node(experiments: tuple[str, ...]) -> dict:
+    """The ``sweep/<table>`` config of a Hydra multirun over `experiments` (``pathrl-train -m +sweep=<table>``)."""
+    return {**SWEEP_SETTINGS, "hydra": {"sweeper": {"params": {"+experiment": ",".join(experiments)}}}}
+
 
 def _train_app_node() -> DictConfig:
     """The ``pathrl-train`` schema as a config node. Its ``env`` group is the env's frozen settings class
@@ -17,6 +26,14 @@ def _train_app_node() -> DictConfig:
 
 
 def register() -> None:
+    """The schemas, and a ``sweep/<table>`` config per sweeps/<table>.yaml that names experiments to train (a
+    broken sweeps/ file: its one-line error, exit 1)."""
+    from pathrl.repro.sweeps import SweepsError
+
+    try:
+        from pathrl.repro.tables import SWEEPS
+    except SweepsError as exc:
+        raise SystemExit(f"error: {exc}") from None
     cs = ConfigStore.instance()
     cs.store(name="dataset_app_schema", node=schema.DatasetAppCfg)
     cs.store(name="toppra_app_schema", node=schema.ToppraAppCfg)
@@ -24,3 +41,6 @@ def register() -> None:
     cs.store(group="robot", name="robot_schema", node=schema.RobotCfg)
     cs.store(group="dataset", name="dataset_schema", node=schema.DatasetCfg)
     cs.store(group="knots", name="knots_schema", node=schema.KnotsCfg)
+    for name, spec in SWEEPS.items():
+        if spec.train:
+            cs.store(group="sweep", name=name, node=sweep_node(spec.train), package="_global_")

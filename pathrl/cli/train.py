@@ -3,7 +3,7 @@
     pathrl-train robot=iiwa7 dataset=random knots=curvature_9 reward=balanced
     pathrl-train ... iterations=600 resume=true          # continue a killed run from its last checkpoint
     pathrl-train +experiment=armar4_random              # one table row (conf/experiment/)
-    pathrl-train -m +sweep=table_II                      # a table's sweep (conf/sweep/, Hydra multirun)
+    pathrl-train -m +sweep=table_II                      # a table's sweep (sweeps/table_II.yaml, Hydra multirun)
     pathrl-train -m reward=length_lt_deviation,balanced  # any ad-hoc sweep
 """
 

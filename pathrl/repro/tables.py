@@ -1,13 +1,17 @@
-"""The paper's Tables I-VII as data: which shipped policy, test split and TOPP-RA run fill each row.
+"""The paper's Tables I-VIII as data: which shipped policy, test split and TOPP-RA run fill each row.
 
 An *evaluation* is one policy on one test split (``Evaluation``); a *baseline* is TOPP-RA on the same
 split, knots and episode plan (``Baseline``). Several rows share them (iiwa7 random fills a row of
-Tables I, II, III and VI), so each is computed once.
+Tables I, II, III and VI), so each is computed once. The rows are read from ``sweeps/<table>.yaml``
+(:mod:`pathrl.repro.sweeps`, package data), the warm starts from the experiments' ``init_from``.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
+
+from pathrl.config.paths import CONF_DIR
+from pathrl.repro.sweeps import SWEEPS_DIR, load_tables, warm_starts
 
 #: Columns of Tables II-IV (and the deviation columns of the Pareto plot).
 SHORT_COLUMNS = ("duration_s", "cart_pos_dev_mean_cm", "cart_pos_dev_max_cm", "cart_pos_dev_final_cm")
@@ -86,25 +90,10 @@ class Row:
     evaluation: Evaluation
 
 
-def _e(model: str, robot: str, dataset: str, knots: str = "curvature_9", segments: str = "paper",
-       generalization: bool = False, task: str | None = None, episodes: int | None = None,
-       open_loop: bool = False, second_test_set: bool = False) -> Evaluation:
-    return Evaluation(model, robot, dataset, knots, segments, generalization, task, episodes, open_loop,
-                      second_test_set)
-
-
-def _ball(model: str, open_loop: bool = False) -> Evaluation:
-    """`model` on the whole ball-balancing test paths in PyBullet."""
-    return _e(model, "iiwa7", "ball_balancing", "distance_5", "full", task="ball_on_plate", open_loop=open_loop)
-
-
 def greedy_model(ev: Evaluation) -> str:
     """The greedy follower's model dir for a row's robot and paths (one per Table I row, whatever its policy)."""
     return f"greedy_{ev.robot}_{ev.dataset}"
 
-
-IIWA_RANDOM = _e("iiwa7_random", "iiwa7", "random")
-ARMAR4_RANDOM = _e("armar4_random", "armar4", "random")
 
 TABLE_I = "table_I_tracking_no_feedback"
 TABLE_I_TEST2 = "table_I_second_test_set"  # ours: Table I's policies on the second test splits
@@ -126,114 +115,46 @@ REALTIME = (("iiwa7", "iiwa7", "iiwa7/random"), ("armar4_with_legs", "armar4_leg
 #: Path-adjustment rows (pathrl.eval.path_change): (row key, shipped model, test split).
 PATH_CHANGE = (("iiwa7/random", "iiwa7_random", "iiwa7/random"), ("armar6/random", "armar6_random", "armar6/random"))
 
-TABLE_I_ROWS: tuple[Row, ...] = (
-    # trained on from iiwa7_random with the path length weighted 6 (conf/experiment/iiwa7_random_continue.yaml);
-    # Tables II-IV keep iiwa7_random, whose rows share one budget
-    Row(TABLE_I, "iiwa7/random", _e("iiwa7_random_continue", "iiwa7", "random")),
-    Row(TABLE_I, "iiwa7/target_point", _e("iiwa7_target_point", "iiwa7", "target_point")),
-    # trained with the path length weighted 1 (conf/experiment/iiwa7_ball_balancing_length_lt.yaml); Table VII's rows
-    # keep iiwa7_ball_balancing (weight 4), their warm starts
-    Row(TABLE_I, "iiwa7/ball_balancing", _e("iiwa7_ball_balancing_length_lt", "iiwa7", "ball_balancing", "distance_5",
-                                            "full")),
-    # trained on from armar6_random at a lower path-length weight (conf/experiment/armar6_random_continue.yaml)
-    Row(TABLE_I, "armar6/random", _e("armar6_random_continue", "armar6", "random")),
-    Row(TABLE_I, "armar4_fixed/random", ARMAR4_RANDOM),
-    # trained on from armar4_target_point at low action noise (conf/experiment/armar4_target_point_continue.yaml)
-    Row(TABLE_I, "armar4_fixed/target_point", _e("armar4_target_point_continue", "armar4", "target_point")),
-)
+#: sweeps/<name>.yaml -> the table its rows fill, in row order (the order of ``evaluations()``).
+TABLE_FILES = {"table_I": TABLE_I, "greedy_follower": TABLE_GREEDY, "table_I_test2": TABLE_I_TEST2,
+               "table_II": TABLE_II, "table_III": TABLE_III, "table_IV": TABLE_IV, "table_VII": TABLE_VII,
+               "table_VIII": TABLE_VIII}
+
+#: The sweeps/ files as read (rows, training sweep), by file stem.
+SWEEPS = load_tables(SWEEPS_DIR, tuple(TABLE_FILES), Evaluation)
+
+ROWS: tuple[Row, ...] = tuple(Row(TABLE_FILES[name], r.key, r.evaluation) for name, spec in SWEEPS.items()
+                              for r in spec.rows)
+
+TABLE_I_ROWS: tuple[Row, ...] = tuple(r for r in ROWS if r.table == TABLE_I)
 
 #: Table I rows without a second test split (the ball-balancing paths have none yet).
-NO_SECOND_TEST_SET = frozenset({"iiwa7/ball_balancing"})
+NO_SECOND_TEST_SET = frozenset(r.key for r in TABLE_I_ROWS) - {r.key for r in ROWS if r.table == TABLE_I_TEST2}
 
 #: Tables of ours alone (no counterpart in the paper); their rows feed other tables' columns.
-OURS_ONLY = frozenset({TABLE_GREEDY})
-
-ROWS: tuple[Row, ...] = (
-    *TABLE_I_ROWS,
-    *(Row(TABLE_GREEDY, r.key, replace(r.evaluation, model=greedy_model(r.evaluation))) for r in TABLE_I_ROWS),
-    *(Row(TABLE_I_TEST2, r.key, replace(r.evaluation, second_test_set=True)) for r in TABLE_I_ROWS
-      if r.key not in NO_SECOND_TEST_SET),
-    Row(TABLE_II, "length_lt_deviation", _e("iiwa7_random_length_lt_deviation", "iiwa7", "random")),
-    Row(TABLE_II, "length_eq_deviation", _e("iiwa7_random_length_eq_deviation", "iiwa7", "random")),
-    Row(TABLE_II, "length_gt_deviation", IIWA_RANDOM),
-    Row(TABLE_III, "knots_5", _e("iiwa7_random_knots5", "iiwa7", "random", "curvature_5")),
-    Row(TABLE_III, "knots_7", _e("iiwa7_random_knots7", "iiwa7", "random", "curvature_7")),
-    Row(TABLE_III, "knots_9", IIWA_RANDOM),
-    Row(TABLE_IV, "iiwa7", _e("iiwa7_random", "iiwa7", "target_point", generalization=True)),
-    Row(TABLE_IV, "armar4_fixed", _e("armar4_random", "armar4", "target_point", generalization=True)),
-    # the tracking policy with the ball riding along unobserved; the policy trained with ball feedback
-    Row(TABLE_VII, "no_balancing_reward", _ball("iiwa7_ball_balancing")),
-    Row(TABLE_VII, "balancing_reward", _ball("iiwa7_ball_balancing_reward")),
-    # not in the paper: the same policy with the ball sensor frozen (open loop), and the model-based controller
-    # (pathrl.baselines.ball_feedback, no learning) closed and open loop
-    Row(TABLE_VII, "balancing_reward/open_loop", _ball("iiwa7_ball_balancing_reward", open_loop=True)),
-    Row(TABLE_VII, "model_based_feedback", _ball("iiwa7_ball_tray_controller")),
-    Row(TABLE_VII, "model_based_feedback/open_loop", _ball("iiwa7_ball_tray_controller", open_loop=True)),
-    # the controller taught to the policy network (DAgger, pathrl.train.distill), then fine-tuned with PPO
-    Row(TABLE_VII, "distilled", _ball("iiwa7_ball_balancing_distill")),
-    Row(TABLE_VII, "distilled/open_loop", _ball("iiwa7_ball_balancing_distill", open_loop=True)),
-    Row(TABLE_VII, "distilled_ppo", _ball("iiwa7_ball_balancing_finetune")),
-    Row(TABLE_VII, "distilled_ppo/open_loop", _ball("iiwa7_ball_balancing_finetune", open_loop=True)),
-    # the same with the controller on the path-dependent time law (pathrl.baselines.tray_time_law)
-    Row(TABLE_VII, "model_based_feedback_path_law", _ball("iiwa7_ball_tray_law")),
-    Row(TABLE_VII, "model_based_feedback_path_law/open_loop", _ball("iiwa7_ball_tray_law", open_loop=True)),
-    Row(TABLE_VII, "distilled_path_law", _ball("iiwa7_ball_balancing_distill_law")),
-    Row(TABLE_VII, "distilled_path_law_ppo", _ball("iiwa7_ball_balancing_finetune_law")),
-    Row(TABLE_VII, "distilled_path_law_ppo/open_loop", _ball("iiwa7_ball_balancing_finetune_law", open_loop=True)),
-    # PPO on a residual over the path-law controller (pathrl.policy.residual): starts as the controller
-    Row(TABLE_VII, "residual_path_law_ppo", _ball("iiwa7_ball_balancing_residual")),
-    Row(TABLE_VII, "residual_path_law_ppo/open_loop", _ball("iiwa7_ball_balancing_residual", open_loop=True)),
-    # free-standing ARMAR-4 in PyBullet, 200 paper segments each (a PyBullet episode costs ~1 s of CPU)
-    Row(TABLE_VIII, "fixed_legs/no_balancing_reward", _e("armar4_target_point", "armar4", "target_point",
-                                                         task="standing", episodes=200)),
-    Row(TABLE_VIII, "fixed_legs/balancing_reward", _e("armar4_target_point_balancing", "armar4", "target_point",
-                                                      task="standing", episodes=200)),
-    Row(TABLE_VIII, "controlled_legs/balancing_reward", _e("armar4_legs_target_point_balancing", "armar4_legs",
-                                                           "target_point", task="standing", episodes=200)),
-    # not in the paper: that policy's upper body with a model-based leg balance law (pathrl.baselines.balance)
-    Row(TABLE_VIII, "controlled_legs/balance_controller", _e("armar4_legs_balance_controller", "armar4_legs",
-                                                             "target_point", task="standing", episodes=200)),
-    # the same law with a guard on the zero-moment point of the commanded next step and a 0.3 s preview
-    Row(TABLE_VIII, "controlled_legs/balance_dynamic", _e("armar4_legs_balance_dynamic", "armar4_legs",
-                                                          "target_point", task="standing", episodes=200)),
-)
-
+OURS_ONLY = frozenset(TABLE_FILES[name] for name, spec in SWEEPS.items() if spec.ours_only)
 
 #: Tables of ours whose rows compare with a table of the paper (same row keys).
-PAPER_TABLE = {TABLE_I_TEST2: TABLE_I}
+PAPER_TABLE = {TABLE_FILES[name]: spec.paper_table for name, spec in SWEEPS.items() if spec.paper_table}
 
 #: Rows of ours that the paper does not have (shown with a dash for the paper's value).
-NOT_IN_PAPER = frozenset({(TABLE_VII, "balancing_reward/open_loop"), (TABLE_VII, "model_based_feedback"),
-                          (TABLE_VII, "model_based_feedback/open_loop"), (TABLE_VII, "distilled"),
-                          (TABLE_VII, "distilled/open_loop"), (TABLE_VII, "distilled_ppo"),
-                          (TABLE_VII, "distilled_ppo/open_loop"), (TABLE_VII, "model_based_feedback_path_law"),
-                          (TABLE_VII, "model_based_feedback_path_law/open_loop"), (TABLE_VII, "distilled_path_law"),
-                          (TABLE_VII, "distilled_path_law_ppo"), (TABLE_VII, "distilled_path_law_ppo/open_loop"),
-                          (TABLE_VII, "residual_path_law_ppo"), (TABLE_VII, "residual_path_law_ppo/open_loop"),
-                          (TABLE_VIII, "controlled_legs/balance_controller"),
-                          (TABLE_VIII, "controlled_legs/balance_dynamic")})
+NOT_IN_PAPER = frozenset((TABLE_FILES[name], r.key) for name, spec in SWEEPS.items() for r in spec.rows
+                         if r.not_in_paper)
 
 #: Model directories that hold a model-based controller (``controller:`` in config.yaml): evaluated, not trained.
-CONTROLLER_MODELS = frozenset({"iiwa7_ball_tray_controller", "iiwa7_ball_tray_law", "armar4_legs_balance_controller",
-                               "armar4_legs_balance_dynamic",
-                               *(greedy_model(r.evaluation) for r in TABLE_I_ROWS)})
+CONTROLLER_MODELS = frozenset(r.evaluation.model for spec in SWEEPS.values() for r in spec.rows if r.controller)
+
+#: Rows trained from another row's policy: {model: source} from conf/experiment/<model>.yaml's
+#: ``init_from: models/<source>`` (own or through its defaults list).
+WARM_STARTS = warm_starts(CONF_DIR / "experiment")
 
 
-#: Rows trained from another row's policy (conf/experiment/<model>.yaml: init_from: models/<source>).
-WARM_STARTS = {"iiwa7_ball_balancing_reward": "iiwa7_ball_balancing",
-               "iiwa7_ball_balancing_imu": "iiwa7_ball_balancing_reward",
-               "iiwa7_ball_balancing_drive": "iiwa7_ball_balancing_reward",
-               "iiwa7_ball_balancing_tcp": "iiwa7_ball_balancing_reward",
-               "iiwa7_ball_balancing_finetune": "iiwa7_ball_balancing_distill",
-               "iiwa7_ball_balancing_finetune_law": "iiwa7_ball_balancing_distill_law",
-               "armar4_target_point_balancing": "armar4_target_point",
-               "armar4_legs_target_point_balancing": "armar4_target_point",
-               "iiwa7_random_continue": "iiwa7_random",
-               "armar6_random_continue": "armar6_random",
-               "armar4_target_point_continue": "armar4_target_point",
-               "armar4_target_point_fast": "armar4_target_point_continue",
-               "armar4_target_point_fast_continue": "armar4_target_point_fast",
-               "iiwa7_random_path_change": "iiwa7_random_continue"}
+def select(only: set[str] | None) -> tuple[Row, ...]:
+    """The rows whose model, or whose sweeps/ file (``table_II``), `only` names (None: every row)."""
+    if only is None:
+        return ROWS
+    files = {table: name for name, table in TABLE_FILES.items()}
+    return tuple(r for r in ROWS if r.evaluation.model in only or files[r.table] in only)
 
 
 def warm_chain(model: str) -> list[str]:
