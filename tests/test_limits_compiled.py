@@ -1,7 +1,7 @@
 """Compiled limit kernels (``pathrl.limits.kernels``) give the eager results and stay safe.
 
-These test the torch code of the valid range, so the native code (``pathrl.native``, the default
-where it builds) is switched off here; ``tests/test_limits_native.py`` compares the two.
+These test the torch code of the valid range, so they run with ``LimitBackend(native=False)`` (the native code,
+``pathrl.native``, is the default where it builds); ``tests/test_limits_native.py`` compares the two.
 
 The first test compiles every kernel (minutes on a fresh 2-core machine; inductor's disk cache makes
 later runs fast). States come from eager rollouts with the property test's action patterns, so they
@@ -14,32 +14,31 @@ import pytest
 import torch
 from test_limits_property import _SHIPPED, DT, ROBOTS, _actions, _rollout
 
-from pathrl import native
-from pathrl.limits import kernels
+from pathrl.limits.backend import LimitBackend, current
 from pathrl.limits.braking import braking_acceleration
 from pathrl.limits.feasible import action_to_acceleration, valid_acceleration_range
 from pathrl.limits.integrate import end_of_step
 
+EAGER, COMPILED = LimitBackend(native=False), LimitBackend(native=False, compiled=True)
+
 
 @pytest.fixture(autouse=True)
 def torch_limit_code():
-    native.set_enabled(False)
-    yield
-    native.set_enabled(True)
+    with EAGER.active():
+        yield
 
 
 @pytest.fixture
 def compiled_kernels():
-    kernels.set_compiled(True)
-    yield
-    kernels.set_compiled(False)
+    with COMPILED.active():
+        yield
 
 
 def _both(fn, *args):
-    kernels.set_compiled(False)
-    eager = fn(*args)
-    kernels.set_compiled(True)
-    return eager, fn(*args)
+    with EAGER.active():
+        eager = fn(*args)
+    with COMPILED.active():
+        return eager, fn(*args)
 
 
 @pytest.mark.parametrize("robot", ROBOTS)
@@ -68,21 +67,14 @@ def test_compiled_rollouts_never_violate_limits(robot: str, compiled_kernels) ->
     assert _rollout(lim, n=64, seed=29) > 0  # asserts zero violations inside
 
 
-def test_switch_is_process_wide_and_off_by_default() -> None:
-    assert not kernels.compiled()
-    kernels.set_compiled(True)
-    assert kernels.compiled()
-    kernels.set_compiled(False)
-    assert not kernels.compiled()
-
-
-def test_use_compiled_restores_the_previous_setting() -> None:
-    with kernels.use_compiled(True):
-        assert kernels.compiled()
-        with kernels.use_compiled(False):
-            assert not kernels.compiled()
-        assert kernels.compiled()
-    assert not kernels.compiled()
+def test_active_backend_nests_and_restores_the_previous_one() -> None:
+    assert current() == EAGER  # this module's fixture
+    with COMPILED.active():
+        assert current().compiled
+        with EAGER.active():
+            assert not current().compiled
+        assert current().compiled
+    assert current() == EAGER
 
 
 def test_compiled_env_advance_equals_eager(compiled_kernels) -> None:

@@ -20,6 +20,7 @@ from test_limits_property import _SHIPPED, DT, ROBOTS, _actions
 
 from pathrl import native
 from pathrl.limits import feasible
+from pathrl.limits.backend import LimitBackend, current
 from pathrl.limits.feasible import action_to_acceleration
 from pathrl.limits.integrate import end_of_step
 
@@ -42,7 +43,7 @@ def _agree(p, v, a, lim, stop_at_knot: bool) -> int:
 def test_native_code_is_built_here() -> None:
     """CI has a C compiler: the default path must be the native one (a silent fallback would hide a break)."""
     assert native.available()
-    assert native.enabled()
+    assert current().native  # the process default
 
 
 @pytest.mark.parametrize("stop_at_knot", [True, False])
@@ -102,12 +103,8 @@ def test_inputs_it_cannot_take_use_the_torch_code() -> None:
     assert not native.applies(p.clone().requires_grad_(), lim.pos)
     assert native.applies(p, longs=(torch.zeros(3, dtype=torch.long),))
     assert not native.applies(p, longs=(torch.zeros(3, dtype=torch.int32),))
-    native.set_enabled(False)
-    try:
-        assert not native.enabled()
+    with LimitBackend(native=False).active():
         lo, hi = feasible.valid_acceleration_range(p, p, p, lim, DT)  # the torch code
-    finally:
-        native.set_enabled(True)
     lo_n, hi_n = feasible.valid_acceleration_range(p, p, p, lim, DT)
     assert torch.allclose(lo, lo_n, rtol=0, atol=1e-12) and torch.allclose(hi, hi_n, rtol=0, atol=1e-12)
 

@@ -3,8 +3,9 @@ time per decision of policy + limits for one env. Writes bench/results.json and 
 
 Paths are synthetic smooth paths inside the joint limits (no dataset needed), so the numbers measure
 the env itself. The valid acceleration range, most of a step, runs in one of three ways (``limits`` in
-each result): ``native`` (the C build in ``pathrl/native``, the default), ``torch`` (the torch
-reference with compiled kernels, ``pathrl.limits.kernels``) and ``eager`` (torch, nothing compiled).
+each result; a :class:`pathrl.limits.backend.LimitBackend`): ``native`` (the C build in ``pathrl/native``, the
+default), ``torch`` (the torch reference with compiled kernels, ``pathrl.limits.kernels``) and ``eager`` (torch,
+nothing compiled).
 The env's fused step (also native in the first mode) and observation kernels are compiled in the first
 two. Threads: 1; 2 (``*_threads2``: torch on both cores, as ``pathrl-train`` runs with ``threads: 2``; the
 native code follows torch's count); and ``*_cores2``: torch on 1 thread, the native code on 2 (torch's
@@ -30,7 +31,7 @@ from pathrl import native  # noqa: E402
 from pathrl.envs.rewards import build_reward_terms  # noqa: E402
 from pathrl.envs.tracking import PathTrackingEnv, TrackingEnvCfg  # noqa: E402
 from pathrl.eval.limit_fuzz import fuzz_env, fuzz_report  # noqa: E402
-from pathrl.limits import kernels  # noqa: E402
+from pathrl.limits.backend import LimitBackend, current  # noqa: E402
 from pathrl.paths.pathset import build_pathset  # noqa: E402
 from pathrl.robot.model import RobotSpec, load_robot_by_name  # noqa: E402
 from pathrl.storage import write_json_atomic  # noqa: E402
@@ -54,10 +55,12 @@ def synthetic_knots(robot: RobotSpec, n_paths: int, seed: int = 0) -> list[np.nd
     return out
 
 
-def make_env(robot: RobotSpec, num_envs: int, seed: int = 0) -> PathTrackingEnv:
+def make_env(robot: RobotSpec, num_envs: int, seed: int = 0, limit_backend: LimitBackend | None = None
+             ) -> PathTrackingEnv:
+    """The benchmark env; `limit_backend` None: it follows the backend in effect (:func:`limit_code`)."""
     knots = synthetic_knots(robot, 64, seed)
     paths = build_pathset(knots, [f"p{i}" for i in range(len(knots))])
-    cfg = TrackingEnvCfg(num_envs=num_envs, seed=seed, n_state=9)
+    cfg = TrackingEnvCfg(num_envs=num_envs, seed=seed, n_state=9, limit_backend=limit_backend)
     return PathTrackingEnv(cfg, robot, paths, build_reward_terms(REWARD))
 
 
@@ -80,14 +83,12 @@ def limit_code(mode: str, threads: int = 1, native_threads: int | None = None):
     if mode not in ("native", "torch", "eager"):
         raise ValueError(f"unknown limit code {mode!r}")
     before = torch.get_num_threads()
-    native.set_enabled(mode == "native")
     native.set_threads(native_threads)
     torch.set_num_threads(threads)
     try:
-        with kernels.use_compiled(mode != "eager"):
+        with LimitBackend(native=mode == "native", compiled=mode != "eager").active():
             yield
     finally:
-        native.set_enabled(True)
         native.set_threads(None)
         torch.set_num_threads(before)
 
@@ -95,7 +96,7 @@ def limit_code(mode: str, threads: int = 1, native_threads: int | None = None):
 def bench_env(robot_name: str, num_envs: int, seconds: float, mode: str = "native", threads: int = 1,
               native_threads: int | None = None) -> dict:
     with limit_code(mode, threads, native_threads):
-        if mode == "native" and not native.enabled():
+        if mode == "native" and not native.available():
             raise RuntimeError("the native limit code is not built (no C compiler?)")
         env = make_env(load_robot_by_name(robot_name), num_envs)
         steps, rate = run_steps(env, seconds, warmup=5 if mode == "eager" else 30)
@@ -151,7 +152,7 @@ def bench_ppo_iteration(robot_name: str, num_envs: int, iterations: int, threads
     try:
         env = make_env(load_robot_by_name(robot_name), num_envs)
         runner = OnPolicyRunner(env, agent, log_dir=None, device="cpu")
-        runner.learn(3 if kernels.compiled() else 1)  # rollouts run in inference mode: kernels compile again
+        runner.learn(3 if current().compiled else 1)  # rollouts run in inference mode: kernels compile again
         phases = {"act": 0.0, "env_step": 0.0, "update": 0.0}
         _time_calls(runner.alg, "act", phases)
         _time_calls(env, "step", phases, "env_step")
@@ -301,7 +302,7 @@ def main() -> None:
     if not modes or any(m not in ("native", "torch", "eager") for m in modes):
         ap.error(f"--limits: expected a comma-separated subset of native,torch,eager, got {args.limits!r}")
     res = {"machine": {"cpus": os.cpu_count(), "platform": platform.platform(), "torch": torch.__version__,
-                       "native_limits": native.enabled()}}
+                       "native_limits": native.available()}}
     suffix = {"native": "", "torch": "_torch", "eager": "_eager"}
     for robot in ("iiwa7", "armar4_legs"):
         for mode in modes:

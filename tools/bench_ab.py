@@ -26,24 +26,32 @@ HERE = Path(__file__).resolve().parents[1]
 
 
 def _load(root: Path, roots: list[Path]):
-    """`tools/bench.py` of `root` with that checkout's `pathrl` imported (compiled kernels on)."""
+    """`tools/bench.py` of `root` with that checkout's `pathrl` imported."""
     for name in [m for m in sys.modules if m == "pathrl" or m.startswith("pathrl.") or m == "bench"]:
         del sys.modules[name]
     others = {str(r) for r in roots} | {str(r / "tools") for r in roots}
     sys.path[:] = [p for p in sys.path if p not in others]
     sys.path[:0] = [str(root), str(root / "tools")]
     import bench
-    from pathrl.limits import kernels
 
-    kernels.set_compiled(True)
     return bench
 
 
 def rate(bench, robot: str, steps: int, warmup: int = 30) -> float:
-    """Env steps per CPU second of `bench.make_env(robot, 4096)` over `steps` steps after `warmup`."""
+    """Env steps per CPU second of `bench.make_env(robot, 4096)` (compiled limit kernels) over `steps` steps after
+    `warmup`."""
     from pathrl.robot.model import load_robot_by_name
 
-    env = bench.make_env(load_robot_by_name(robot), 4096)
+    spec = load_robot_by_name(robot)
+    try:
+        from pathrl.limits.backend import LimitBackend
+    except ImportError:  # a checkout from before the explicit limit backend: its process-wide switch
+        from pathrl.limits import kernels
+
+        kernels.set_compiled(True)
+        env = bench.make_env(spec, 4096)
+    else:
+        env = bench.make_env(spec, 4096, limit_backend=LimitBackend(compiled=True))
     gen = torch.Generator().manual_seed(0)
     actions = [torch.rand(env.num_envs, env.num_actions, generator=gen) * 2 - 1 for _ in range(8)]
     for k in range(warmup):

@@ -42,6 +42,7 @@ ADDED_KEYS: dict[str, Any] = {
     "teacher": {},
     "residual": {},
     "critic_warmup": {"iterations": 0, "learning_rate": None},
+    "native_limits": True,  # the native limit code where available, as every run before the key (pathrl.limits.backend)
 }
 
 

@@ -150,6 +150,7 @@ class TrainAppCfg:
     device: str = "cpu"
     threads: int = 2
     compile_limits: bool = True  # torch.compile the limit kernels (pathrl.limits.kernels)
+    native_limits: bool = True  # native C valid range and env step where available (pathrl.limits.backend)
     iterations: int = 400
     resume: bool = False
     run_dir: str = MISSING

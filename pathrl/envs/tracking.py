@@ -60,6 +60,7 @@ from pathrl.envs.feedback import Feedback
 from pathrl.envs.rewards import TASK_VALUES, RewardTerm, StepQuantities
 from pathrl.envs.terminations import TERMINATION_REASONS  # noqa: F401 (moved)
 from pathrl.envs.tracking_cfg import FREE_JOINT_ACTIONS, TrackingEnvCfg  # noqa: F401 (moved)
+from pathrl.limits.backend import current, env_scoped
 from pathrl.limits.braking import braking_within
 from pathrl.limits.feasible import (
     JointLimits,
@@ -166,7 +167,7 @@ class PathTrackingEnv(_VecEnvBase):
         reward_terms: list[RewardTerm],
         feedback: Feedback | None = None,
     ) -> None:
-        self.cfg = cfg
+        self.cfg, self.limit_backend = cfg, cfg.limit_backend  # limit code of steps (None: the one in effect)
         self.feedback = feedback
         self.control_steps = int(round(cfg.control_rate * cfg.dt))
         self.robot = robot
@@ -330,10 +331,11 @@ class PathTrackingEnv(_VecEnvBase):
         self.paths = paths.to(self.device)
 
     # ------------------------------------------------------------------ observation
+    @env_scoped
     def _update_window(self) -> None:
         """Recompute the valid acceleration range, the knot window and the observation of all envs."""
-        a_min, a_max = valid_acceleration_range(self.pos, self.vel, self.acc, self.limits, self.cfg.dt)
-        self.a_min, self.a_max = a_min, a_max
+        self.a_min, self.a_max = valid_acceleration_range(self.pos, self.vel, self.acc, self.limits, self.cfg.dt,
+                                                          self.limit_backend)
         self._obs = self._observe()
 
     def _observe(self) -> Tensor:
@@ -373,6 +375,7 @@ class PathTrackingEnv(_VecEnvBase):
             actions = torch.where(self.hold, actions.clamp(-1.0, 1.0) + pull, actions)
         return action_to_acceleration(actions, self.a_min, self.a_max, self.hold)
 
+    @env_scoped  # current() below: this env's limit_backend if it has one
     def step(self, actions: Tensor) -> tuple[TensorDict, Tensor, Tensor, dict]:
         cfg = self.cfg
         # a NaN action entry acts as 0 and +-inf as +-1: every action, finite or not, maps into the valid range
@@ -386,9 +389,9 @@ class PathTrackingEnv(_VecEnvBase):
 
         # 2.-4. integrate, progress along the path, deviation (one fused kernel)
         table, length = self.paths.table, self.paths.length
-        native_step = native.applies(self.pos, self.vel, self.acc, a1, self.s, self.end_s, table, length,
-                                     self.dev_weights, longs=(self.path_index, self.seg_path)) \
-            and native.advance_supports(len(self.path_index), cfg.substeps, table.shape[1])
+        native_step = (current().native and native.advance_supports(len(self.path_index), cfg.substeps, table.shape[1])
+                       and native.applies(self.pos, self.vel, self.acc, a1, self.s, self.end_s, table, length,
+                                          self.dev_weights, longs=(self.path_index, self.seg_path)))
         p1, v1, moved, dev_max, dev_mean = (native.advance if native_step else advance)(  # same results (tests)
             self.pos, self.vel, self.acc, a1, self.path_index, self.s, self.end_s, self.seg_path, table, length,
             self.dev_weights, cfg.dt, cfg.substeps, self.paths.table_step)

@@ -4,7 +4,7 @@
 :mod:`pathrl.cli.store`) and, read back with :meth:`EnvSettings.from_mapping`, the typed settings at run time. Its
 defaults are the only ones; ``conf/env/tracking.yaml`` sets only the values training uses differently.
 :class:`TrackingEnvCfg` adds what the env takes from the rest of a run config (device, seed, ``knots.n_state``,
-``task.observe`` / ``task.fail_terminates``) and from the caller (``knot_gap_norm``, ``autoreset``);
+``task.observe`` / ``task.fail_terminates``) and from the caller (``knot_gap_norm``, ``autoreset``, ``limit_backend``);
 :meth:`TrackingEnvCfg.from_run` builds it from a resolved run config (saved runs through
 :func:`pathrl.config.migrate.migrate`). No Hydra here.
 """
@@ -16,6 +16,8 @@ import typing
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
+
+from pathrl.limits.backend import LimitBackend
 
 __all__ = ["FREE_JOINT_ACTIONS", "EnvSettings", "TrackingEnvCfg"]
 
@@ -95,6 +97,9 @@ class TrackingEnvCfg(EnvSettings):
     feedback_obs: bool = True  # with a feedback source: its sensor values are part of the state (task.observe)
     fail_terminates: bool = True  # with a feedback source: its failure (ball off the plate) ends the episode
     autoreset: bool = True
+    #: the limit code of this env's steps (pathrl.limits.backend); None: the one in effect at each call (training:
+    #: the run's native_limits / compile_limits around its iterations; evaluation: its compile_limits flag)
+    limit_backend: LimitBackend | None = None
 
     @classmethod
     def from_run(cls, cfg: Mapping[str, Any], num_envs: int | None = None, seed: int | None = None,
@@ -118,6 +123,8 @@ class TrackingEnvCfg(EnvSettings):
             raise ValueError(f"env.n_state must be >= 1, got {self.n_state}")
         if self.knot_gap_norm is not None and not float(self.knot_gap_norm) > 0.0:
             raise ValueError(f"env.knot_gap_norm must be > 0 or null, got {self.knot_gap_norm}")
+        if self.limit_backend is not None and not isinstance(self.limit_backend, LimitBackend):
+            raise ValueError(f"env limit_backend must be a LimitBackend or None, got {self.limit_backend!r}")
 
 
 def _convert(key: str, value: Any, tp: Any) -> Any:
@@ -129,6 +136,8 @@ def _convert(key: str, value: Any, tp: Any) -> Any:
         raise ValueError(f"env.{key}: null is not allowed")
     if type(None) in args:  # X | None
         tp = next(a for a in args if a is not type(None))
+    if tp is LimitBackend:
+        return value  # checked by TrackingEnvCfg
     try:
         if typing.get_origin(tp) is tuple:
             return tuple(float(x) for x in value)

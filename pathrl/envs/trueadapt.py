@@ -38,6 +38,7 @@ from torch import Tensor
 from pathrl.dataset.trueadapt import TrajectoryBank
 from pathrl.envs.feedback import PLATE_SIZE, AnalyticBall
 from pathrl.envs.trueadapt_rewards import AdaptQuantities, AdaptReward
+from pathrl.limits.backend import LimitBackend, env_scoped
 from pathrl.limits.feasible import JointLimits, valid_acceleration_range
 from pathrl.limits.integrate import end_of_step, interpolate_step
 from pathrl.robot.model import RobotSpec
@@ -78,6 +79,7 @@ class AdaptEnvCfg:
     ball_mass: tuple[float, float] = (0.002, 0.203)  # kg, uniform per episode (see module docstring)
     sensor_noise: float = 0.002  # std of the measured ball position per axis (m)
     autoreset: bool = True
+    limit_backend: LimitBackend | None = None  # limit code of the steps (pathrl.limits.backend); None: as in effect
 
     def __post_init__(self) -> None:
         """One-line ValueError naming the key for values that would run but give a wrong result."""
@@ -101,6 +103,8 @@ class AdaptEnvCfg:
         steps = self.control_rate * self.dt
         if abs(steps - round(steps)) > 1e-9 or round(steps) < 3:
             raise ValueError(f"env.control_rate * env.dt must be an integer >= 3, got {steps}")
+        if self.limit_backend is not None and not isinstance(self.limit_backend, LimitBackend):
+            raise ValueError(f"env limit_backend must be a LimitBackend or None, got {self.limit_backend!r}")
 
 
 def clip_to_range(actions: Tensor, acc_limit: Tensor, a_min: Tensor, a_max: Tensor) -> Tensor:
@@ -124,6 +128,7 @@ class TrueAdaptEnv(_VecEnvBase):
         if bank.pos.shape[2] != robot.dof:
             raise ValueError(f"trajectories have {bank.pos.shape[2]} joints, robot {robot.name} has {robot.dof}")
         self.cfg, self.robot, self.reward = cfg, robot, reward
+        self.limit_backend = cfg.limit_backend
         self.device = torch.device(cfg.device)
         self.num_envs = n = cfg.num_envs
         self.num_actions = robot.dof
@@ -195,9 +200,11 @@ class TrueAdaptEnv(_VecEnvBase):
         return self.cfg.sensor_noise * z
 
     # ------------------------------------------------------------------ observation
+    @env_scoped
     def _refresh(self) -> None:
         """Valid acceleration range and observation of every env."""
-        self.a_min, self.a_max = valid_acceleration_range(self.pos, self.vel, self.acc, self.limits, self.cfg.dt)
+        self.a_min, self.a_max = valid_acceleration_range(self.pos, self.vel, self.acc, self.limits, self.cfg.dt,
+                                                          self.limit_backend)
         self._obs = self._observe()
 
     def reference_at(self, offset: int) -> Tensor:
@@ -246,6 +253,7 @@ class TrueAdaptEnv(_VecEnvBase):
         return (self.bank.acc[self.traj, i] / self.limits.acc).clamp(-1.0, 1.0)
 
     # ------------------------------------------------------------------ step
+    @env_scoped
     def step(self, actions: Tensor) -> tuple[TensorDict, Tensor, Tensor, dict]:
         cfg, lim = self.cfg, self.limits
         a1 = clip_to_range(actions.to(self.device), lim.acc, self.a_min, self.a_max)
@@ -325,7 +333,7 @@ def adapt_cfg_from(cfg: dict, num_envs: int | None = None, seed: int | None = No
 
     adapt = dict(cfg["task"]["adapt"])
     known = {f.name for f in fields(AdaptEnvCfg)} - {"num_envs", "device", "seed", "dt", "control_rate",
-                                                    "fail_terminates", "obs_ball", "autoreset"}
+                                                    "fail_terminates", "obs_ball", "autoreset", "limit_backend"}
     unknown = sorted(set(adapt) - known)
     if unknown:
         raise ValueError(f"task.adapt: unknown keys {unknown}; valid: {sorted(known)}")

@@ -6,6 +6,7 @@ import json
 import os
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -24,7 +25,7 @@ from pathrl.envs.terminations import TerminationReason
 from pathrl.envs.tracking import PathTrackingEnv
 from pathrl.eval.metrics import METRIC_KEYS, episode_deviations
 from pathrl.eval.rollout import EpisodeRecord, rollout
-from pathrl.limits import kernels
+from pathrl.limits.backend import current
 from pathrl.limits.check import limit_violations
 from pathrl.limits.feasible import JointLimits
 from pathrl.logging.mcap_io import McapJsonWriter
@@ -187,9 +188,10 @@ def evaluate(
     they were trained with). `task` adds a task to a run trained without one (e.g. ``ball_on_plate``: the
     ball rides along unobserved, as the paper's "no balancing reward" row). A task failure (ball off the
     plate) does not end an evaluation episode: the tracking metrics cover the whole path and the failure
-    is reported per episode (``task_failed``) and as ``task_failed_pct``. ``compile_limits``: see
-    :mod:`pathrl.limits.kernels` (same results to rounding); off by default: an evaluation is a few hundred
-    steps, too short to earn back the per-process tracing (iiwa7, 1200 episodes: 17 s eager, 35 s compiled).
+    is reported per episode (``task_failed``) and as ``task_failed_pct``. ``compile_limits``: the rollouts run
+    with compiled limit kernels (:class:`pathrl.limits.backend.LimitBackend`; same results to rounding); off by
+    default: an evaluation is a few hundred steps, too short to earn back the per-process tracing (iiwa7, 1200
+    episodes: 17 s eager, 35 s compiled).
     ``open_loop``: the task's sensor stays at its first value of each episode (:class:`FrozenSensor`).
     ``checkpoint``: a checkpoint file name in `run_dir` (e.g. ``model_99.pt``) instead of the latest one.
     ``out_of_limits``: paths of the dataset that leave the robot's position limits are refused or clipped.
@@ -230,7 +232,7 @@ def evaluate(
         else:
             policy = load_policy(cfg, env, ckpt)
         t0 = time.perf_counter()
-        with kernels.use_compiled(compile_limits):
+        with replace(current(), compiled=compile_limits).active():
             records = _run(env, policy, plan, episodes, progress)
         rollout_s = time.perf_counter() - t0
     finally:

@@ -14,6 +14,7 @@ other load on the machine (e.g. a training run beside it).
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -23,7 +24,7 @@ from pathrl import native
 from pathrl.dataset.io import load_pathset
 from pathrl.envs.rewards import build_reward_terms
 from pathrl.envs.tracking import PathTrackingEnv, TrackingEnvCfg
-from pathrl.limits import kernels
+from pathrl.limits.backend import current
 from pathrl.limits.integrate import interpolate_step
 from pathrl.paths.knots import KnotStrategy
 from pathrl.paths.segments import Segments, evaluation_plan
@@ -53,11 +54,11 @@ def realtime_ratios(robot: RobotSpec, dataset_path: str, episodes: int = 50, sim
                     seed: int = 0, compile_limits: bool = True) -> dict[str, Any]:
     """Per-episode compute / duration ratios (%) on paper-protocol segments of a test split.
 
-    With ``compile_limits`` (:mod:`pathrl.limits.kernels`) the episodes are first run once untimed: the
+    With ``compile_limits`` (:class:`pathrl.limits.backend.LimitBackend`) the episodes are first run once untimed: the
     timed pass then repeats states whose kernels are all compiled (a first compilation inside a timed
     episode would dominate its ratio).
     """
-    with kernels.use_compiled(compile_limits):
+    with replace(current(), compiled=compile_limits).active():
         return _realtime_ratios(robot, dataset_path, episodes, simulate, seed, compile_limits)
 
 
@@ -81,7 +82,7 @@ def _realtime_ratios(robot: RobotSpec, dataset_path: str, episodes: int, simulat
     r = np.asarray(ratios)
     d = np.asarray(per_decision)
     return {"robot": robot.name, "simulated": simulate, "compile_limits": compile_limits,
-            "limits": "native" if native.enabled() else "torch", "episodes": episodes,
+            "limits": "native" if current().native and native.available() else "torch", "episodes": episodes,
             "decisions": int(d.size), "max_compute_to_duration_pct": float(r.max()),
             "mean_compute_to_duration_pct": float(r.mean()), "decision_ms_mean": 1e3 * float(d.mean()),
             "decision_ms_max": 1e3 * float(d.max())}

@@ -29,7 +29,9 @@ klimits is measured in ``tests/test_limits.py``; safety of whole trajectories in
 The torch code here is the reference and runs on any device. For float64 CPU tensors the same
 computation runs by default in a native build (``pathrl/native/valid_range.c``, one element at
 a time, no per-op dispatch; ``tests/test_limits_native.py`` checks it against this code to 1e-9 of the
-acceleration limit): ``pathrl.native.set_enabled(False)`` switches it off.
+acceleration limit). Which code runs is the limit backend (:class:`pathrl.limits.backend.LimitBackend`): given
+to :func:`valid_acceleration_range`, else the one in effect (an env's, a ``with backend.active():`` block's, else
+native where available, kernels eager).
 """
 
 from __future__ import annotations
@@ -44,6 +46,7 @@ from pathrl import native
 from pathrl.limits._braking import Side, greedy_bound, in_step_bound, pick, reach_top
 from pathrl.limits._knot import knot_stop_bound
 from pathrl.limits._velocity import velocity_bound, velocity_emergency, velocity_floor
+from pathrl.limits.backend import LimitBackend, current
 from pathrl.limits.kernels import kernel
 
 __all__ = ["CONFLICT_TOL", "DEFAULT_DT", "KNOT_SLACK", "OUTSIDE_TOL", "PLAN_MARGIN", "SETTLE_FACTOR",
@@ -138,24 +141,25 @@ def acceleration_to_action(acc: Tensor, a_min: Tensor, a_max: Tensor) -> Tensor:
     return torch.where(acc >= c, up, down).clamp(-1.0, 1.0)
 
 
-def valid_acceleration_range(p: Tensor, v: Tensor, a: Tensor, limits: JointLimits,
-                             dt: float = DEFAULT_DT) -> tuple[Tensor, Tensor]:
+def valid_acceleration_range(p: Tensor, v: Tensor, a: Tensor, limits: JointLimits, dt: float = DEFAULT_DT,
+                             backend: LimitBackend | None = None) -> tuple[Tensor, Tensor]:
     """Valid range for the acceleration at the end of the next step.
 
     Args:
         p, v, a: (N, D) float64 position, velocity, acceleration at the current decision step.
         limits: joint limits (D joints).
         dt: decision step (s).
+        backend: the limit code to run (None: the one in effect, :func:`pathrl.limits.backend.current`).
 
     Returns:
         ``(a_min, a_max)``, each (N, D), physical units, ``a_min <= a_max``, within ``[-acc, acc]``.
     """
-    lo, hi, _ = _valid_range(p, v, a, limits, dt, stop_at_knot=True)
+    lo, hi, _ = _valid_range(p, v, a, limits, dt, stop_at_knot=True, backend=backend)
     return lo, hi
 
 
-def _valid_range(p: Tensor, v: Tensor, a: Tensor, limits: JointLimits, dt: float,
-                 stop_at_knot: bool) -> tuple[Tensor, Tensor, Tensor]:
+def _valid_range(p: Tensor, v: Tensor, a: Tensor, limits: JointLimits, dt: float, stop_at_knot: bool,
+                 backend: LimitBackend | None = None) -> tuple[Tensor, Tensor, Tensor]:
     """:func:`valid_acceleration_range` plus a (N, D) mask: the jerk, velocity and position ranges
     overlap inside ``[-acc, acc]`` (no conflict had to be resolved; the state is in the valid set).
 
@@ -163,13 +167,16 @@ def _valid_range(p: Tensor, v: Tensor, a: Tensor, limits: JointLimits, dt: float
     result then equals klimits with ``set_velocity_after_max_pos_to_zero=False``; tests only, it is not
     safe in general).
 
-    Runs the native build (:mod:`pathrl.native`) for float64 CPU tensors while it is switched on
-    (``native.set_enabled``, default on where a C compiler is found), else the torch code below.
+    Runs the native build (:mod:`pathrl.native`) for float64 CPU tensors if `backend` (None: the one in effect)
+    has ``native`` set (the default) and the build is available, else the torch code below, its kernels compiled
+    as `backend` says.
     """
-    if native.applies(p, v, a, limits.pos, limits.vel, limits.acc, limits.jerk):
-        return native.valid_range(p, v, a, limits.pos, limits.vel, limits.acc, limits.jerk,
-                                  _reach_radius(limits, dt), dt, stop_at_knot)
-    return _valid_range_torch(p, v, a, limits, dt, stop_at_knot)
+    backend = backend or current()
+    with backend.active():  # the kernels below (and the reach radius) compile as `backend` says
+        if backend.native and native.applies(p, v, a, limits.pos, limits.vel, limits.acc, limits.jerk):
+            return native.valid_range(p, v, a, limits.pos, limits.vel, limits.acc, limits.jerk,
+                                      _reach_radius(limits, dt), dt, stop_at_knot)
+        return _valid_range_torch(p, v, a, limits, dt, stop_at_knot)
 
 
 def _valid_range_torch(p: Tensor, v: Tensor, a: Tensor, limits: JointLimits, dt: float,

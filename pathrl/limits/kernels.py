@@ -1,11 +1,13 @@
-"""Optional ``torch.compile`` of the elementwise limit kernels (a process-wide switch, off by default).
+"""Optional ``torch.compile`` of the elementwise limit kernels (``LimitBackend.compiled``; off by default).
 
 The valid-range computation is a few hundred small elementwise torch ops, applied to subsets of a few
 to a few thousand elements. In eager mode the per-op dispatch dominates (measured: ``greedy_peak`` on
 40 elements 517 us eager vs 38 us compiled). Functions marked :func:`kernel` are pure elementwise
-maps; when compilation is on, each is compiled once (inductor, dynamic shapes, C++ compiler needed)
-and fused into one loop. Data-dependent control flow (which elements need work, iteration counts)
-stays in eager code around them. Results agree with eager mode to rounding (~1e-16 relative).
+maps; when the backend in effect (:func:`pathrl.limits.backend.current`: an env's ``limit_backend``, a
+``with LimitBackend(compiled=True).active():`` block, else the process default, eager) compiles, each is
+compiled once (inductor, dynamic shapes, C++ compiler needed) and fused into one loop. Data-dependent control
+flow (which elements need work, iteration counts) stays in eager code around them. Results agree with eager mode
+to rounding (~1e-16 relative).
 On float64 CPU tensors the valid range itself runs natively by default (:mod:`pathrl.native`);
 these kernels then serve the env's fused step and observation, and the torch reference (GPU, tests).
 
@@ -16,42 +18,20 @@ seconds.
 
 from __future__ import annotations
 
-import contextlib
 import functools
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from typing import TypeVar
 
 import torch
 
-__all__ = ["compiled", "kernel", "set_compiled", "use_compiled"]
+from pathrl.limits.backend import current
+
+__all__ = ["kernel"]
 
 
 F = TypeVar("F", bound=Callable)
 
-_enabled = False
 _compiled: dict[Callable, Callable] = {}
-
-
-def set_compiled(enabled: bool) -> None:
-    """Switch compiled kernels on or off for this process."""
-    global _enabled
-    _enabled = bool(enabled)
-
-
-def compiled() -> bool:
-    """Whether compiled kernels are on."""
-    return _enabled
-
-
-@contextlib.contextmanager
-def use_compiled(enabled: bool) -> Iterator[None]:
-    """Compiled kernels on or off inside a ``with`` block; the previous setting is restored after it."""
-    before = _enabled
-    set_compiled(enabled)
-    try:
-        yield
-    finally:
-        set_compiled(before)
 
 
 def _batch_size(args: tuple) -> int:
@@ -66,7 +46,7 @@ def _batch_size(args: tuple) -> int:
 
 
 def kernel(fn: F | None = None, *, static: bool = False) -> F | Callable[[F], F]:
-    """Mark a pure elementwise function; compiled on first use while :func:`set_compiled` is on.
+    """Mark a pure elementwise function; compiled on first use while the backend in effect compiles.
 
     Batches of 0 or 1 elements run eagerly: dynamic shapes specialize those sizes, and a recompile in
     the middle of a run would cost more than it saves. ``static=True`` (``@kernel(static=True)``) compiles
@@ -79,7 +59,7 @@ def kernel(fn: F | None = None, *, static: bool = False) -> F | Callable[[F], F]
 
     @functools.wraps(fn)
     def call(*args):
-        if not _enabled or torch.compiler.is_compiling() or _batch_size(args) < 2:
+        if torch.compiler.is_compiling() or not current().compiled or _batch_size(args) < 2:
             return fn(*args)
         compiled_fn = _compiled.get(fn)
         if compiled_fn is None:

@@ -9,8 +9,9 @@ The torch code is the reference (and runs on any device); the tests compare both
 compiled on first use with the system C compiler (``$CC``, default ``cc``; no torch headers, about a
 second) into one library in ``$PATHRL_CACHE_DIR`` (default ``~/.cache/pathrl``), named by the hash of the
 sources, so an edited source is rebuilt and a stale library is never loaded. No compiler: the torch code
-runs instead (:func:`available` is False; one warning). ``PATHRL_NATIVE=0`` or
-:func:`set_enabled` switch the native code off.
+runs instead (:func:`available` is False; one warning). ``PATHRL_NATIVE=0`` makes the native code unavailable
+(the documented way to run without it, e.g. to compare). Whether available native code is used is chosen by the
+limit backend in effect (:class:`pathrl.limits.backend.LimitBackend`, ``native``; default on).
 
 Rows are split over :func:`threads` threads (torch's count unless set); ctypes releases the GIL during a call.
 """
@@ -81,33 +82,18 @@ def _library() -> ctypes.CDLL | None:
     return lib
 
 
-_enabled = True
-
-
-def set_enabled(enabled: bool) -> None:
-    """Use the native code where it applies (True, the default) or always the torch code, process-wide."""
-    global _enabled
-    _enabled = bool(enabled)
-
-
 def available() -> bool:
     """Whether the native library is built and loadable (``PATHRL_NATIVE=0`` makes it unavailable)."""
     return _library() is not None
 
 
-def enabled() -> bool:
-    """Whether the native code is switched on and available."""
-    return _enabled and available()
-
-
 def applies(*floats: Tensor, longs: tuple[Tensor, ...] = ()) -> bool:
-    """Whether the native code is on and can take these inputs: `floats` float64 and `longs` int64 CPU
-    tensors, none requiring grad."""
+    """Whether the native code is available and can take these inputs: `floats` float64 and `longs` int64 CPU
+    tensors, none requiring grad. (Whether to use it is the caller's limit backend.)"""
     def fits(t: Tensor, dtype: torch.dtype) -> bool:
         return t.dtype == dtype and t.device.type == "cpu" and not t.requires_grad
 
-    return (_enabled and all(fits(t, torch.float64) for t in floats) and all(fits(t, torch.int64) for t in longs)
-            and available())
+    return all(fits(t, torch.float64) for t in floats) and all(fits(t, torch.int64) for t in longs) and available()
 
 
 @functools.cache

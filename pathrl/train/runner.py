@@ -20,7 +20,7 @@ from pathrl.envs.path_changes import with_path_changes
 from pathrl.envs.registry import make_env
 from pathrl.envs.state import restore, snapshot, snapshot_is_exact, unwrapped
 from pathrl.envs.tracking import PathTrackingEnv
-from pathrl.limits import kernels
+from pathrl.limits.backend import LimitBackend
 from pathrl.policy import policy_role
 from pathrl.policy.models import MixedMLP
 from pathrl.policy.residual import ControllerObs, ResidualEnv, check_residual_cfg, zero_last_layer
@@ -230,6 +230,7 @@ def check_run_cfg(cfg: dict[str, Any]) -> None:
             raise ValueError(f"agent.{key} must be >= 1, got {cfg['agent'][key]}")
     if cfg.get("float32_from") is not None:
         float32_iteration(cfg["float32_from"], int(cfg["iterations"]))
+    LimitBackend.from_run(cfg)  # native_limits, compile_limits: true or false
 
 
 def train(cfg: dict[str, Any], run_dir: Path, resume: bool = False) -> dict[str, Any]:
@@ -247,7 +248,8 @@ def train(cfg: dict[str, Any], run_dir: Path, resume: bool = False) -> dict[str,
         diff = config_change(yaml.safe_load((run_dir / "config.yaml").read_text()), cfg)
         if diff:
             raise ValueError(f"resume with a different config ({diff}); use the same overrides or a new run_dir")
-    env = make_env(cfg, "train")  # bad values and data fail here, before anything is written into run_dir
+    with LimitBackend(native=LimitBackend.from_run(cfg).native).active():  # the run's native choice, kernels eager
+        env = make_env(cfg, "train")  # bad values and data fail here, before anything is written into run_dir
     env = with_path_changes(cfg, env)  # path_change group (pathrl.envs.path_changes); absent or off: env itself
     distill = cfg["agent"]["algorithm"]["class_name"] == "Distillation"
     if distill:
@@ -291,7 +293,7 @@ def train(cfg: dict[str, Any], run_dir: Path, resume: bool = False) -> dict[str,
     if loaded is not None and not runner.restore_streams(loaded):
         print(f"note: {ckpt.name} holds no exact env state; the resumed run starts new episodes", file=sys.stderr)
     if remaining:
-        with kernels.use_compiled(bool(cfg.get("compile_limits", False))):
+        with LimitBackend.from_run(cfg).active():  # native_limits, compile_limits (the env follows it)
             runner.learn(num_learning_iterations=remaining)
     else:  # killed after its last checkpoint: rewrite (and so close) the log the killed process left open
         runner.logger.init_logging_writer()
@@ -355,7 +357,7 @@ def _with_base(cfg: dict[str, Any], env: PathTrackingEnv) -> ResidualEnv:
 
 
 #: Top-level keys a resume may change.
-RESUME_MAY_CHANGE = frozenset({"resume", "iterations", "compile_limits"})
+RESUME_MAY_CHANGE = frozenset({"resume", "iterations", "compile_limits", "native_limits"})
 
 
 def config_change(saved: dict[str, Any], cfg: dict[str, Any]) -> str:
