@@ -46,7 +46,7 @@ def _step(env, steps: int = STEPS) -> None:
             assert obs.shape == (n, env.num_obs) and bool(torch.isfinite(obs).all())
             assert rew.shape == (n,) and bool(torch.isfinite(rew).all())
             assert dones.shape == (n,) and dones.dtype == torch.bool and "time_outs" in extras
-            if hasattr(env, "termination"):  # the tracking env: one reason per env, NONE exactly where not done
+            if hasattr(env, "termination"):  # tracking, TrueAdapt: one reason per env, NONE exactly where not done
                 assert env.termination.shape == (n,) and env.termination.dtype == torch.int8
                 assert torch.equal(env.termination != TerminationReason.NONE, dones)
     finally:

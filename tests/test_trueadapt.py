@@ -17,6 +17,7 @@ from omegaconf import OmegaConf
 from pathrl.cli.common import CONF_DIR
 from pathrl.dataset.io import DatasetError
 from pathrl.dataset.trueadapt import bank_from_arrays, load_trajectories, mirror_variants
+from pathrl.envs.terminations import TerminationReason
 from pathrl.envs.trueadapt import AdaptEnvCfg, TrueAdaptEnv, clip_to_range
 from pathrl.envs.trueadapt_rewards import (
     AdaptQuantities,
@@ -191,8 +192,9 @@ def test_same_seed_same_episodes_and_a_deviation_ends_the_episode():
         _, _, dones, _ = env.step(torch.ones(3, 7))
         if bool(dones.any()):
             break
-    assert bool(env.last_step["dev_terminated"].any())
-    assert int(env.episode_length_buf[env.last_step["dev_terminated"]].max()) == 0  # reset on the spot
+    deviated = env.termination == TerminationReason.DEVIATION
+    assert bool(deviated.any())
+    assert int(env.episode_length_buf[deviated].max()) == 0  # reset on the spot
 
 
 def test_replaying_the_reference_follows_it_exactly_to_the_end():

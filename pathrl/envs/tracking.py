@@ -467,7 +467,7 @@ class PathTrackingEnv(_VecEnvBase):
         self.braking = self.braking | reached
         dev_term = terms.deviation_exceeded(dev_max, cfg.max_deviation)
         terminated = stopped | dev_term
-        task_term = failed & ~terminated if cfg.fail_terminates else torch.zeros_like(failed)
+        task_term = terms.task_failed(failed, cfg.fail_terminates) & ~terminated
         terminated = terminated | task_term
         time_outs = terms.timed_out(self.episode_length_buf, self.budget) & ~terminated
         self.termination = terms.termination_reason(stopped, dev_term, task_term, time_outs)

@@ -18,7 +18,10 @@ MDP (TrueAdapt Sec. V; iiwa7 with a ball on a plate, ``task=trueadapt_on_plate |
           deviates more than ``max_joint_deviation`` from the reference; when the task fails (on plate: the
           ball reaches the border, ``border_margin`` inside the plate edge; in place: it is more than
           ``max_ball_offset`` from its start; both: it leaves the plate) and ``fail_terminates`` is set; and
-          at the end of the trajectory. Nothing here is a time-out.
+          at the end of the trajectory. Nothing here is a time-out. Why it ended: ``env.termination``, (N,) int8
+          :class:`~pathrl.envs.terminations.TerminationReason` codes set once per step from the pure terms of
+          :mod:`pathrl.envs.terminations` (``DEVIATION``, ``TASK_FAILED``, ``TRAJECTORY_END``; first wins).
+          A success is an episode that reached the end and never lost the ball.
   ball    the analytic ball (:class:`pathrl.envs.feedback.AnalyticBall`), fed the step's control-rate
           setpoints; domain randomisation per episode: radius, rolling friction (uniform in the configured
           ranges), mass (drawn and kept: the analytic rolling model does not depend on it), and Gaussian
@@ -36,15 +39,17 @@ from tensordict import TensorDict
 from torch import Tensor
 
 from pathrl.dataset.trueadapt import TrajectoryBank
+from pathrl.envs import terminations as terms
 from pathrl.envs.feedback import PLATE_SIZE, AnalyticBall
+from pathrl.envs.terminations import TerminationReason
 from pathrl.envs.trueadapt_rewards import AdaptQuantities, AdaptReward
 from pathrl.limits.backend import LimitBackend, env_scoped
 from pathrl.limits.feasible import JointLimits, valid_acceleration_range
 from pathrl.limits.integrate import end_of_step, interpolate_step
 from pathrl.robot.model import RobotSpec
 
-__all__ = ["MODES", "AdaptEnvCfg", "TrueAdaptEnv", "adapt_cfg_from", "ball_border_position", "build_trueadapt_env",
-           "check_adapt_cfg", "clip_to_range"]
+__all__ = ["MODES", "AdaptEnvCfg", "TrueAdaptEnv", "adapt_cfg_from", "ball_border_position", "ball_lost",
+           "build_trueadapt_env", "check_adapt_cfg", "clip_to_range"]
 
 try:  # rsl-rl is a training dependency; the env works without it (evaluation, tests).
     from rsl_rl.env import VecEnv as _VecEnvBase
@@ -118,6 +123,13 @@ def ball_border_position(xy: Tensor, half: Tensor) -> Tensor:
     return (xy.abs() / half).amax(dim=1)
 
 
+def ball_lost(on: Tensor, rel: Tensor, offset: Tensor, mode: str, max_ball_offset: float) -> Tensor:
+    """(N,) bool: the task failed -- the ball left the plate (on (N,) bool False), or on plate it reached the
+    border (rel (N,) :func:`ball_border_position` >= 1), in place it is more than `max_ball_offset` (m) from its
+    start (offset (N,) m)."""
+    return ~on | ((rel >= 1.0) if mode == "on_plate" else (offset > max_ball_offset))
+
+
 class TrueAdaptEnv(_VecEnvBase):
     """N robots adapting reference trajectories while carrying a ball on a plate (rsl-rl ``VecEnv``)."""
 
@@ -149,6 +161,8 @@ class TrueAdaptEnv(_VecEnvBase):
         self.episode_length_buf = torch.zeros(n, dtype=torch.long, device=self.device)
         self.failed = torch.zeros(n, dtype=torch.bool, device=self.device)
         self.ok_steps = torch.zeros(n, dtype=torch.long, device=self.device)
+        #: (N,) int8 TerminationReason of the last step (NONE: the episode goes on; pathrl.envs.terminations)
+        self.termination = torch.zeros(n, dtype=torch.int8, device=self.device)
         self.meas, self.prev_meas, self.start_meas, self.start_xy = (torch.zeros(n, 2, **f64) for _ in range(4))
         self.ball_mass = torch.zeros(n, **f64)
         self.ep = {k: torch.zeros(n, **f64) for k in ("reward", "acc", "jerk", "offset")}
@@ -264,13 +278,13 @@ class TrueAdaptEnv(_VecEnvBase):
         xy = self.ball.xy
         rel = ball_border_position(xy, self.half)
         offset = (xy - self.start_xy).norm(dim=1)
-        lost = ~self.ball_on() | ((rel >= 1.0) if cfg.mode == "on_plate" else (offset > cfg.max_ball_offset))
+        lost = ball_lost(self.ball_on(), rel, offset, cfg.mode, cfg.max_ball_offset)
         self.failed |= lost
         q = AdaptQuantities(acc_norm=a1.abs() / lim.acc, jerk=(a1 - self.acc).abs() / cfg.dt, jerk_max=lim.jerk,
                             deviation=(p1 - ref1).abs().amax(dim=1), ball_rel=rel, ball_offset=offset,
                             ball_ok=(~self.failed).to(torch.float64))
-        terms = self.reward.terms(q)
-        reward = self.reward.combine(terms)
+        reward_terms = self.reward.terms(q)
+        reward = self.reward.combine(reward_terms)
 
         self.pos, self.vel, self.acc = p1, v1, a1
         self.episode_length_buf += 1
@@ -283,23 +297,30 @@ class TrueAdaptEnv(_VecEnvBase):
         self.ep["jerk"] += (q.jerk / lim.jerk).mean(dim=1)
         self.ep["offset"] += offset
 
-        dev_term = q.deviation > cfg.max_joint_deviation
-        end = self.episode_length_buf >= self.bank.steps[self.traj]
-        fail_term = lost if cfg.fail_terminates else torch.zeros_like(lost)
-        dones = dev_term | end | fail_term
-        success = end & ~self.failed & ~dev_term
+        self.termination = self._termination(q.deviation, lost)
+        dones = self.termination != TerminationReason.NONE
+        success = (self.termination == TerminationReason.TRAJECTORY_END) & ~self.failed
         self.last_step = {"a1": a1, "deviation": q.deviation, "ball_xy": xy, "ball_offset": offset,
-                          "failed": self.failed.clone(), "success": success, "dev_terminated": dev_term, "end": end,
-                          "dones": dones, **{f"term/{k}": v for k, v in terms.items()}}
+                          "failed": self.failed.clone(), "success": success, "termination": self.termination,
+                          "dones": dones, **{f"term/{k}": v for k, v in reward_terms.items()}}
         if self.record_setpoints:
             self.last_step.update(q_control=q_c, v_control=v_c, a_control=a_c)
-        extras = {"time_outs": torch.zeros_like(dones), "log": self._episode_log(dones, success, dev_term, fail_term)}
+        extras = {"time_outs": torch.zeros_like(dones), "log": self._episode_log(dones, success)}
         if cfg.autoreset:
             ids = dones.nonzero().squeeze(1)
             self.start(ids, torch.randint(self.bank.num, (len(ids),), generator=self.generator, device=self.device),
                        refresh=False)
         self._refresh()
         return self.get_observations(), reward.to(torch.float32), dones, extras
+
+    def _termination(self, deviation: Tensor, lost: Tensor) -> Tensor:
+        """(N,) int8 reasons of this step (after the state update) from the terms of :mod:`pathrl.envs.terminations`:
+        a joint's deviation (N,) rad beyond ``max_joint_deviation``, the task failed in this step (lost (N,) bool)
+        with ``fail_terminates``, the trajectory's last sample reached; the first wins (``ADAPT_ENDINGS``)."""
+        masks = (terms.deviation_exceeded(deviation, self.cfg.max_joint_deviation),
+                 terms.task_failed(lost, self.cfg.fail_terminates),
+                 terms.timed_out(self.episode_length_buf, self.bank.steps[self.traj]))
+        return terms.first_reason(list(zip(terms.ADAPT_ENDINGS, masks, strict=True)))
 
     def episode_metrics(self, dones: Tensor) -> dict[str, Tensor]:
         """Per finished env (dones (N,) bool; call before the reset): trajectory fraction executed before the task
@@ -309,13 +330,15 @@ class TrueAdaptEnv(_VecEnvBase):
         return {"fraction": self.ok_steps[dones] / total, "acc": self.ep["acc"][dones] / steps,
                 "jerk": self.ep["jerk"][dones] / steps, "offset": self.ep["offset"][dones] / steps}
 
-    def _episode_log(self, dones: Tensor, success: Tensor, dev_term: Tensor, fail_term: Tensor) -> dict:
+    def _episode_log(self, dones: Tensor, success: Tensor) -> dict:
+        """Episode reward, the share of each termination reason (``self.termination``) and the metrics of the
+        episodes that ended in this step."""
         if not bool(dones.any()):
             return {}
         m = self.episode_metrics(dones)
+        ended = self.termination[dones]
         return {"Episode_Reward/total": self.ep["reward"][dones].mean(),
-                "Episode_Termination/deviation": dev_term[dones].float().mean(),
-                "Episode_Termination/task_failed": fail_term[dones].float().mean(),
+                **{f"Episode_Termination/{r.label}": (ended == r).float().mean() for r in terms.ADAPT_ENDINGS},
                 "Metrics/success": success[dones].float().mean(), "Metrics/trajectory_fraction": m["fraction"].mean(),
                 "Metrics/acc_norm": m["acc"].mean(), "Metrics/jerk_norm": m["jerk"].mean(),
                 "Metrics/ball_offset_m": m["offset"].mean()}

@@ -5,7 +5,8 @@ border; in place: never more than ``max_ball_offset`` from its start; and no joi
 termination threshold), the fraction of the trajectory executed before the task failed, the mean normalised
 |acceleration| and |jerk| over joints and steps, and the mean distance of the ball from its start (error distance).
 For diagnosis also why a trajectory failed: ``lost`` (the task failed: ball at the border / too far from its start /
-off the plate) and ``deviation_end`` (the episode was cut by the joint deviation termination).
+off the plate) and ``deviation_end`` (the episode was cut by the joint deviation termination: its
+``env.termination`` reason is ``DEVIATION``).
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ from collections.abc import Callable
 import torch
 from torch import Tensor
 
+from pathrl.envs.terminations import TerminationReason
 from pathrl.envs.trueadapt import TrueAdaptEnv
 
 __all__ = ["METRICS", "OUTCOMES", "evaluate", "reference_policy", "run_trajectories", "summary"]
@@ -27,7 +29,8 @@ def reference_policy(env: TrueAdaptEnv) -> Tensor:
     return env.reference_actions()
 
 
-#: Per-trajectory outcomes (0/1) and metrics of :func:`run_trajectories`.
+#: Per-trajectory outcomes (0/1) and metrics of :func:`run_trajectories`: success and failed (the ball was lost,
+#: ``env.failed``) from ``env.last_step``, dev_terminated from ``env.termination``.
 OUTCOMES = ("success", "failed", "dev_terminated")
 METRICS = ("fraction", "acc", "jerk", "offset")
 
@@ -53,12 +56,14 @@ def run_trajectories(env: TrueAdaptEnv, policy: Policy, batch: Tensor,
             env.step(policy(env))
         if on_step is not None:
             on_step(pending[:n].cpu())
-        done = env.last_step["dones"] & pending
+        done = (env.termination != TerminationReason.NONE) & pending
         if bool(done.any()):
             m = env.episode_metrics(done)
             at = done[:n].nonzero().squeeze(1).cpu()
+            outcome = {"success": env.last_step["success"], "failed": env.last_step["failed"],
+                       "dev_terminated": env.termination == TerminationReason.DEVIATION}
             for k in OUTCOMES:
-                out[k][at] = env.last_step[k][done].double().cpu()
+                out[k][at] = outcome[k][done].double().cpu()
             for k in METRICS:
                 out[k][at] = m[k].double().cpu()
             pending &= ~done
