@@ -149,7 +149,7 @@ def test_shipped_models_carry_a_digest():
 
 @pytest.mark.slow
 def test_soak_small(tmp_path):
-    r = subprocess.run([sys.executable, "tools/soak.py", "--kills", "3", "--iterations", "400",
+    r = subprocess.run([sys.executable, "tools/soak.py", "--kills", "3", "--iterations", "150", "--max-delay", "6",
                         "--work", str(tmp_path / "w"), "--out", str(tmp_path / "soak.json")],
                        cwd=ROOT, capture_output=True, text=True, timeout=600)
     rep = json.loads((tmp_path / "soak.json").read_text())
