@@ -144,9 +144,9 @@ def test_run_config_chooses_the_backend_and_old_runs_keep_theirs():
         saved = yaml.safe_load(path.read_text())
         if "controller" in saved or "compile_limits" not in saved:
             continue
-        assert "native_limits" not in saved
-        backend = LimitBackend.from_run(migrate(saved))  # saved before the key: native where available, as then
-        assert backend == LimitBackend(native=True, compiled=bool(saved["compile_limits"])), path.parent.name
+        native = saved.get("native_limits", True)  # saved before the key: native where available, as then
+        backend = LimitBackend.from_run(migrate(saved))
+        assert backend == LimitBackend(native=native, compiled=bool(saved["compile_limits"])), path.parent.name
         assert config_change(saved, {**migrate(saved), "native_limits": False}) == ""  # a resume may change it
 
 
