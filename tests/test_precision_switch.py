@@ -66,3 +66,18 @@ def test_fraction_of_the_iterations():
     for bad in (-0.1, 1.5, "half", float("nan")):
         with pytest.raises(ValueError, match="float32_from"):
             float32_iteration(bad, 600)
+
+
+def test_bfloat16_warning_names_the_roles_to_switch_and_only_when_slow():
+    from pathrl.policy.models import bfloat16_warning
+
+    model = "pathrl.train.models:MixedPrecisionMLPModel"
+    agent = {"actor": {"class_name": model, "hidden_dtype": "bfloat16"},
+             "critic": {"class_name": model, "hidden_dtype": "float32"}, "algorithm": {"class_name": "PPO"}}
+    msg = bfloat16_warning(agent, slowdown=12.0)
+    assert msg is not None and "12x slower" in msg and msg.endswith("add agent.actor.hidden_dtype=float32 for a much "
+                                                                    "faster run")
+    assert "\n" not in msg and "critic" not in msg
+    assert bfloat16_warning(agent, slowdown=0.6) is None  # native bfloat16: faster, nothing to say
+    agent["actor"]["hidden_dtype"] = "float32"
+    assert bfloat16_warning(agent, slowdown=12.0) is None  # nothing in bfloat16

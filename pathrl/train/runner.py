@@ -22,7 +22,7 @@ from pathrl.envs.state import restore, snapshot, snapshot_is_exact, unwrapped
 from pathrl.envs.tracking import PathTrackingEnv
 from pathrl.limits.backend import LimitBackend
 from pathrl.policy import policy_role
-from pathrl.policy.models import MixedMLP
+from pathrl.policy.models import MixedMLP, bfloat16_warning
 from pathrl.policy.residual import ControllerObs, ResidualEnv, check_residual_cfg, zero_last_layer
 from pathrl.storage import (
     CheckpointError,
@@ -239,17 +239,11 @@ def train(cfg: dict[str, Any], run_dir: Path, resume: bool = False) -> dict[str,
     torch.set_num_threads(int(cfg.get("threads", 1)))
     torch.manual_seed(int(cfg["seed"]))
     run_dir.mkdir(parents=True, exist_ok=True)
-    if latest_checkpoint(run_dir) is not None and not resume:
-        raise FileExistsError(f"{run_dir} already holds checkpoints; pass resume=true or choose another run_dir")
-    ckpt = resume_point(run_dir) if resume else None
-    if ckpt is None:
-        clean_leftovers(run_dir)
-    if ckpt is not None and (run_dir / "config.yaml").exists():
-        diff = config_change(yaml.safe_load((run_dir / "config.yaml").read_text()), cfg)
-        if diff:
-            raise ValueError(f"resume with a different config ({diff}); use the same overrides or a new run_dir")
+    ckpt = _resume_checkpoint(run_dir, cfg, resume)
     with LimitBackend(native=LimitBackend.from_run(cfg).native).active():  # the run's native choice, kernels eager
         env = make_env(cfg, "train")  # bad values and data fail here, before anything is written into run_dir
+    if slow := bfloat16_warning(cfg["agent"]):  # bfloat16 on a CPU that emulates it: a PPO update ~13x slower
+        print(f"warning: {slow}", file=sys.stderr)
     env = with_path_changes(cfg, env)  # path_change group (pathrl.envs.path_changes); absent or off: env itself
     distill = cfg["agent"]["algorithm"]["class_name"] == "Distillation"
     if distill:
@@ -313,6 +307,21 @@ def train(cfg: dict[str, Any], run_dir: Path, resume: bool = False) -> dict[str,
     }
     write_json_atomic(run_dir / "summary.json", summary)
     return summary
+
+
+def _resume_checkpoint(run_dir: Path, cfg: dict[str, Any], resume: bool) -> Path | None:
+    """The checkpoint a run resumes from (None: a new run, the leftovers of a killed start cleaned); refuses to
+    overwrite checkpoints without `resume` and to resume under another config."""
+    if latest_checkpoint(run_dir) is not None and not resume:
+        raise FileExistsError(f"{run_dir} already holds checkpoints; pass resume=true or choose another run_dir")
+    ckpt = resume_point(run_dir) if resume else None
+    if ckpt is None:
+        clean_leftovers(run_dir)
+    if ckpt is not None and (run_dir / "config.yaml").exists():
+        diff = config_change(yaml.safe_load((run_dir / "config.yaml").read_text()), cfg)
+        if diff:
+            raise ValueError(f"resume with a different config ({diff}); use the same overrides or a new run_dir")
+    return ckpt
 
 
 def float32_iteration(fraction: Any, total: int) -> int:
