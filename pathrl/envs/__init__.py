@@ -6,6 +6,7 @@
 - :mod:`pathrl.envs.tracking`: ``PathTrackingEnv``; its settings :mod:`pathrl.envs.tracking_cfg` (``EnvSettings``, the
   ``env`` config group and its only defaults; ``TrackingEnvCfg.from_run(cfg)``);
 - :mod:`pathrl.envs.terminations`: ``TerminationReason`` and the termination terms;
+- :mod:`pathrl.envs.observations`: ``OBS_TERMS``, the observation terms of the tracking env and their layout;
 - :mod:`pathrl.envs.rewards`: reward terms; :mod:`pathrl.envs.feedback`: the analytic ball and sensors;
 - :mod:`pathrl.envs.trueadapt`, :mod:`pathrl.envs.trueadapt_rewards`: TrueAdapt trajectory adaptation;
 - :mod:`pathrl.envs.factory`: config glue (``task_cfg``, ``make_feedback``); saved runs are brought up to date by

@@ -9,7 +9,9 @@ MDP (paper, Sec. III; original_pathtracking.md 3-7):
           absolute knot positions are ``knot_obs=absolute``. With ``end_obs`` the state also holds the
           vector from the robot to the segment's end knot and the arc length left, both scaled by the knot
           gap D (clipped to [-1, 1]): seen at the window's scale (K D) the last centimetres vanish, and a
-          deterministic policy could come to rest just short of the end.
+          deterministic policy could come to rest just short of the end. The observation's terms (state,
+          feedback, tcp), their fixed order and column layout: :mod:`pathrl.envs.observations`,
+          ``env.observation_layout()``.
   action  one value in [-1, 1] per joint, mapped into the valid acceleration range for the end of the
           next 0.1 s step (jerk/acceleration/velocity/position limits, braking stays possible).
   reward  sum of weighted terms (pathrl.envs.rewards): path length R_l and deviation R_d (+ task terms).
@@ -57,6 +59,14 @@ from torch import Tensor
 from pathrl import native
 from pathrl.envs import terminations as terms
 from pathrl.envs.feedback import Feedback
+from pathrl.envs.observations import (  # observe_state, tcp_observation: moved, re-exported
+    active_terms,
+    assemble,
+    observation_layout,
+    observe_state,
+    tcp_observation,
+    tracking_state,
+)
 from pathrl.envs.rewards import TASK_VALUES, RewardTerm, StepQuantities
 from pathrl.envs.terminations import TERMINATION_REASONS  # noqa: F401 (moved)
 from pathrl.envs.tracking_cfg import FREE_JOINT_ACTIONS, TrackingEnvCfg  # noqa: F401 (moved)
@@ -111,49 +121,6 @@ def advance(pos: Tensor, vel: Tensor, acc: Tensor, a1: Tensor, path_index: Tenso
     dev_max = dev.amax(dim=1)
     dev_mean = torch.where(moved > 1e-12, (dev * seg_len).sum(1) / moved.clamp(min=1e-12), dev.mean(dim=1))
     return p1, v1, moved, dev_max, dev_mean
-
-
-def tcp_observation(ref: Tensor, cmd: Tensor, box: Tensor, error_scale: float) -> Tensor:
-    """The TCP part of the state, before clipping: reference and commanded TCP positions (N, T, 3) in metres,
-    `box` (3, 2) [min, max] per axis -> (N, 6 T): per TCP the reference mapped from the box to [-1, 1], then
-    (reference - commanded) / error_scale."""
-    ref_n = 2.0 * (ref - box[:, 0]) / (box[:, 1] - box[:, 0]) - 1.0
-    return torch.cat([ref_n, (ref - cmd) / error_scale], dim=2).flatten(1)
-
-
-@kernel(static=True)
-def observe_state(pos: Tensor, vel: Tensor, acc: Tensor, pos_lim: Tensor, vel_lim: Tensor, acc_lim: Tensor,
-                  path_index: Tensor, knots: Tensor, knot_s: Tensor, path: Tensor, knot_i: Tensor, s: Tensor,
-                  end_knot: Tensor, end_q: Tensor, end_s: Tensor, n_state: int, horizon: float, knot_gap: float,
-                  relative: bool, end_obs: bool) -> tuple[Tensor, Tensor, Tensor]:
-    """The tracking state of N envs (the layout of the module docstring, before clipping), float64 (N, k).
-
-    pos, vel, acc: (N, D); pos_lim (D, 2), vel_lim, acc_lim (D,); knots (P, K, M) / knot_s (P, K) of the
-    path bank, padded; path, knot_i (last knot at or behind s), end_knot: (N,) long; s, end_s: (N,) arc
-    length; end_q: (N, M) end knot. Also returns l_obs (N,): arc length of the window's last knot, and
-    close_to_end (N,): the window reaches the end knot.
-    """
-    lo, hi = pos_lim[:, 0], pos_lim[:, 1]
-    pos_n = 2.0 * (pos - lo) / (hi - lo) - 1.0
-    i0 = torch.minimum(knot_i, end_knot)
-    ii = torch.minimum(i0.unsqueeze(1) + torch.arange(n_state, device=s.device), end_knot.unsqueeze(1))  # (N, n)
-    win = knots[path.unsqueeze(1), ii]  # (N, n, M)
-    ks = knot_s[path.unsqueeze(1), ii]
-    q = pos.index_select(1, path_index)
-    if relative:  # translation invariant: the direction and distance to each knot
-        knots_n = ((win - q.unsqueeze(1)) / horizon).flatten(1)
-    else:
-        plo, phi = lo.index_select(0, path_index), hi.index_select(0, path_index)
-        knots_n = (2.0 * (win - plo) / (phi - plo) - 1.0).flatten(1)
-    d0 = ks[:, :1]
-    inside = 2.0 * (s.unsqueeze(1) - d0) / knot_gap - 1.0
-    ahead = 2.0 * (ks - d0) / horizon - 1.0  # [:, -1] is the window length
-    parts = [pos_n, vel / vel_lim, acc / acc_lim, knots_n, inside, ahead[:, -1:], ahead[:, 1:]]
-    if end_obs:
-        to_end = (end_q - q) / knot_gap
-        left = 2.0 * ((end_s - s) / knot_gap).clamp(0.0, 1.0) - 1.0
-        parts += [to_end, left.unsqueeze(1)]
-    return torch.cat(parts, dim=1), ks[:, -1], ks[:, -1] >= end_s
 
 
 class PathTrackingEnv(_VecEnvBase):
@@ -230,7 +197,7 @@ class PathTrackingEnv(_VecEnvBase):
         self.ep_reward = {t.name: torch.zeros(n, **f64) for t in reward_terms}
         self.ep_dev_sum = torch.zeros(n, **f64)
         self.ep_dev_max = torch.zeros(n, **f64)
-        self._obs = None
+        self.obs_terms, self._obs = active_terms(self), None  # the terms in their order (pathrl.envs.observations)
         self.last_step: dict[str, Tensor] = {}
         #: (N,) bool or None (all): envs whose feedback is simulated. Evaluation rollouts clear the envs whose
         #: episode has ended: their physics would be wasted work (most of an evaluation in PyBullet).
@@ -339,21 +306,13 @@ class PathTrackingEnv(_VecEnvBase):
         self._obs = self._observe()
 
     def _observe(self) -> Tensor:
-        lim = self.limits
-        obs, self.l_obs, self.close_to_end = observe_state(
-            self.pos, self.vel, self.acc, lim.pos, lim.vel, lim.acc, self.path_index, self.paths.knots,
-            self.paths.knot_s, self.seg_path, self.knot_i, self.s,
-            self.end_knot, self.end_q, self.end_s, self.cfg.n_state,
-            self.horizon, self.knot_gap, self.cfg.knot_obs == "relative", self.cfg.end_obs)
-        if self.feedback is not None and self.cfg.feedback_obs:
-            obs = torch.cat([obs, self.feedback.observe().to(obs.dtype)], dim=1)
-        if self.fk is not None:
-            ref = self.pos.clone()
-            ref[:, self.path_index] = self.paths.position_at(self.seg_path, self.s)
-            tcp = self.fk.tcp_positions(torch.cat([ref, self.pos]))
-            obs = torch.cat([obs, tcp_observation(tcp[:self.num_envs], tcp[self.num_envs:], self.tcp_box,
-                                                  self.cfg.tcp_obs_error)], dim=1)
-        return obs.clamp(-1.0, 1.0).to(torch.float32)
+        """The observation of all envs: the env's terms (:mod:`pathrl.envs.observations`) in their fixed order."""
+        state, self.l_obs, self.close_to_end = tracking_state(self)
+        return assemble(self.obs_terms, self, {"state": state})
+
+    def observation_layout(self, fields: bool = False) -> list[tuple[str, int, int]]:
+        """(term, start, stop) column slices of the observation (``fields``: the state split into its fields)."""
+        return observation_layout(self.obs_terms, self, fields)
 
     @property
     def num_obs(self) -> int:
@@ -496,4 +455,5 @@ class PathTrackingEnv(_VecEnvBase):
         """JSON-able summary of the env (saved with runs)."""
         return {"cfg": asdict(self.cfg), "robot": self.robot.name, "num_obs": self.num_obs,
                 "feedback": None if self.feedback is None else self.feedback.name,
-                "num_actions": self.num_actions, "knot_gap_norm": self.knot_gap}
+                "num_actions": self.num_actions, "knot_gap_norm": self.knot_gap,
+                "obs_layout": [list(s) for s in self.observation_layout()]}

@@ -226,7 +226,8 @@ class TrueAdaptEnv(_VecEnvBase):
         i = (self.episode_length_buf + offset).clamp(max=self.bank.steps[self.traj])
         return self.bank.pos[self.traj, i]
 
-    def _observe(self) -> Tensor:
+    def _obs_parts(self) -> list[tuple[str, Tensor]]:
+        """The state's parts in order (module docstring), as (name, (N, k) float64 before clipping)."""
         cfg, lim = self.cfg, self.limits
         lo, hi = lim.pos[:, 0], lim.pos[:, 1]
 
@@ -235,16 +236,27 @@ class TrueAdaptEnv(_VecEnvBase):
 
         parts = []
         if cfg.obs_position:
-            parts.append(norm(self.pos))
+            parts.append(("pos", norm(self.pos)))
         if cfg.obs_velocity:
-            parts.append(self.vel / lim.vel)
+            parts.append(("vel", self.vel / lim.vel))
         if cfg.obs_acceleration:
-            parts.append(self.acc / lim.acc)
-        parts += [self.prev_meas / self.half, self.meas / self.half]
+            parts.append(("acc", self.acc / lim.acc))
+        parts += [("prev_ball", self.prev_meas / self.half), ("ball", self.meas / self.half)]
         if cfg.mode == "in_place":
-            parts.append((self.meas - self.start_meas) / cfg.offset_scale)
-        parts += [norm(self.reference_at(k)) for k in range(1, cfg.n_following + 1)]
-        return torch.cat(parts, dim=1).clamp(-1.0, 1.0).to(torch.float32)
+            parts.append(("ball_offset", (self.meas - self.start_meas) / cfg.offset_scale))
+        parts += [(f"reference_{k}", norm(self.reference_at(k))) for k in range(1, cfg.n_following + 1)]
+        return parts
+
+    def _observe(self) -> Tensor:
+        return torch.cat([t for _, t in self._obs_parts()], dim=1).clamp(-1.0, 1.0).to(torch.float32)
+
+    def observation_layout(self) -> list[tuple[str, int, int]]:
+        """(part, start, stop) column slices of the observation, in order; they cover it exactly."""
+        out, start = [], 0
+        for name, t in self._obs_parts():
+            out.append((name, start, start + int(t.shape[1])))
+            start = out[-1][2]
+        return out
 
     @property
     def num_obs(self) -> int:
@@ -346,7 +358,8 @@ class TrueAdaptEnv(_VecEnvBase):
     def describe(self) -> dict:
         """JSON-able summary of the env (saved with runs)."""
         return {"cfg": asdict(self.cfg), "robot": self.robot.name, "num_obs": self.num_obs,
-                "num_actions": self.num_actions, "trajectories": self.bank.num}
+                "num_actions": self.num_actions, "trajectories": self.bank.num,
+                "obs_layout": [list(s) for s in self.observation_layout()]}
 
 
 # ---------------------------------------------------------------------------------------------------- config glue
