@@ -45,14 +45,17 @@ class SegmentPath:
 
     @property
     def dof(self) -> int:
+        """Number of joints M."""
         return self._m
 
     @property
     def path_interval(self) -> np.ndarray:
+        """The path parameter's range [0, 1]."""
         return np.array([0.0, 1.0])
 
     @property
     def waypoints(self):
+        """None: the path has no waypoints toppra could use."""
         return None
 
 

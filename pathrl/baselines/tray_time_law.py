@@ -60,6 +60,8 @@ class PlateAccelerationConstraint(LinearConstraint):
         self._format_string = f"    Kind: plate acceleration, |a_i| <= {bound} m/s^2\n"
 
     def compute_constraint_params(self, path, gridpoints, *args, **kwargs):
+        """toppra's (a, b, c, F, g, ubound, xbound) of the constraint at `gridpoints` (G,): the plate acceleration a
+        r_dd + b r_d^2 (G, 3) within ±bound per axis."""
         r, h = np.asarray(gridpoints, dtype=np.float64), self.h
         p_lo, p_0, p_hi = self.plate(path(r - h)), self.plate(path(r)), self.plate(path(r + h))
         a = (p_hi - p_lo) / (2.0 * h)

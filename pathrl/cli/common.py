@@ -10,6 +10,8 @@ from omegaconf import DictConfig, OmegaConf
 
 from pathrl.config.paths import CONF_DIR
 
+__all__ = ["CONF_DIR", "UserError", "compose", "hydra_message", "parse_key_values", "run_cli", "to_container"]
+
 
 class UserError(Exception):
     """Bad user input (argument, config, dataset, checkpoint): reported as one line, exit code 2."""

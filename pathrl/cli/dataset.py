@@ -19,15 +19,20 @@ from typing import Any
 
 from pathrl.cli.common import UserError, compose, run_cli, to_container
 
+__all__ = ["cmd_generate", "cmd_import", "cmd_info", "main", "print_info", "print_limits"]
+
 USAGE = __doc__.split("\n\n")[1]
 
 
 class _Parser(argparse.ArgumentParser):
+    """argparse parser whose errors raise UserError (one line, exit code 2) instead of exiting."""
     def error(self, message: str) -> None:  # one line, exit code 2 via UserError
+        """Raise UserError with the parser's message instead of printing usage and exiting."""
         raise UserError(f"{self.prog}: {message}")
 
 
 def _fmt_stats(st: Mapping[str, Any]) -> str:
+    """One line of a split's statistics: path count, knots min/mean/max, length min/mean/max (rad), max knot gap."""
     if not st or not st.get("count"):
         return "0 paths"
     k, length = st["knots"], st["length"]
@@ -168,6 +173,8 @@ def cmd_info(argv: Sequence[str]) -> None:
 
 
 def _main(argv: list[str]) -> None:
+    """Dispatch `argv` (command first) to the generate / import / info command; UserError for a missing or unknown
+    one."""
     if not argv or argv[0] in ("-h", "--help"):
         if argv:
             print(USAGE)

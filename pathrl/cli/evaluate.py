@@ -18,6 +18,8 @@ from pathlib import Path
 
 from pathrl.cli.common import UserError, parse_key_values, run_cli
 
+__all__ = ["main"]
+
 USAGE = ("usage: pathrl-eval run_dir=RUN [dataset=NAME | dataset.path=DIR] [split=test] [episodes=N] "
          "[segments=paper|full] [seed=S] [out=DIR] [record=true|false] [task=ball_on_plate|standing] "
          "[backend=pybullet|analytic] [compile_limits=true|false] [open_loop=true|false] [checkpoint=model_K.pt] "
@@ -105,6 +107,7 @@ def _print_table(m: dict) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Entry point of ``pathrl-eval key=value ...`` (argv: sys.argv[1:]); returns the exit code."""
     return run_cli(_main, argv)
 
 

@@ -14,6 +14,8 @@ from pathlib import Path
 
 from pathrl.cli.common import UserError, parse_key_values, run_cli
 
+__all__ = ["main"]
+
 USAGE = "usage: pathrl-export run_dir=RUN [out=DIR] [dataset.path=DIR] [observations=N]"
 KEYS = {"run_dir", "out", "dataset.path", "observations"}
 
@@ -71,4 +73,5 @@ def _main(argv: list[str]) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Entry point of ``pathrl-export key=value ...`` (argv: sys.argv[1:]); returns the exit code."""
     return run_cli(_main, argv)

@@ -30,6 +30,8 @@ import numpy as np
 from pathrl.cli.common import UserError, compose, run_cli, to_container
 from pathrl.storage import atomic_write
 
+__all__ = ["RECORD_KEYS", "main"]
+
 COMMANDS = ("table2", "speed", "sweep", "train", "table4", "record", "validate", "timing")
 USAGE = "usage: pathrl-industrial {table2,speed,sweep,train,table4,record,validate,timing} [key=value ...]"
 #: keys of ``record`` only (not config keys)
@@ -259,6 +261,7 @@ def _record(argv: Sequence[str]) -> None:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``pathrl-industrial COMMAND [key=value ...]`` (argv: sys.argv[1:]); returns the exit code."""
     return run_cli(_main, argv)
 
 

@@ -7,6 +7,8 @@ from omegaconf import DictConfig, OmegaConf
 
 from pathrl.config import schema
 
+__all__ = ["SWEEP_SETTINGS", "register", "sweep_node"]
+
 #: Every training sweep's settings besides its experiments: joblib, 2 jobs (conf/hydra/launcher/local.yaml) of one
 #: torch thread each (n_jobs x threads = the 2 cores of the reference machine).
 SWEEP_SETTINGS = {"defaults": [{"override /hydra/launcher": "local"}], "threads": 1}

@@ -17,6 +17,8 @@ from hydra.core.utils import JobReturn, JobStatus
 from hydra.experimental.callback import Callback
 from omegaconf import DictConfig
 
+__all__ = ["LAST_SWEEP", "SweepReport", "job_error", "print_summary", "read_jobs", "sweep_exit_code"]
+
 #: The sweep directory of the multirun this process started (set in the launching process), else None.
 LAST_SWEEP: Path | None = None
 _SUMMARIZED = False
@@ -34,6 +36,8 @@ def job_error(job_return: JobReturn) -> str | None:
 
 
 def read_jobs(sweep_dir: Path) -> list[dict[str, Any]]:
+    """The job records of a sweep (``<sweep_dir>/jobs.jsonl``, one dict per finished job: job, overrides, status,
+    error); [] if none."""
     path = Path(sweep_dir) / "jobs.jsonl"
     if not path.exists():
         return []
@@ -41,6 +45,7 @@ def read_jobs(sweep_dir: Path) -> list[dict[str, Any]]:
 
 
 def print_summary(sweep_dir: Path) -> None:
+    """Print how many of a sweep's jobs finished and one line per failed job (its overrides and error)."""
     recs = read_jobs(sweep_dir)
     failed = [r for r in recs if r["status"] != "ok"]
     print(f"sweep: {len(recs) - len(failed)}/{len(recs)} jobs finished ({Path(sweep_dir) / 'jobs.jsonl'})", flush=True)
@@ -61,12 +66,17 @@ def sweep_exit_code(fallback: int) -> int:
 
 
 class SweepReport(Callback):
+    """Hydra callback: appends each multirun job's outcome to ``jobs.jsonl`` and prints the summary when the sweep
+    ends."""
+
     def on_multirun_start(self, config: DictConfig, **kwargs: Any) -> None:
+        """Remember the sweep directory and start a new ``jobs.jsonl`` there."""
         global LAST_SWEEP, _SUMMARIZED
         LAST_SWEEP, _SUMMARIZED = Path(config.hydra.sweep.dir), False
         (LAST_SWEEP / "jobs.jsonl").unlink(missing_ok=True)  # a reused sweep dir starts a new record
 
     def on_job_end(self, config: DictConfig, job_return: JobReturn, **kwargs: Any) -> None:
+        """Append the job's number, overrides, status and one-line error to ``jobs.jsonl`` (multiruns only)."""
         if config.hydra.mode is None or str(config.hydra.mode) != "RunMode.MULTIRUN":
             return
         error = job_error(job_return)
@@ -82,6 +92,7 @@ class SweepReport(Callback):
             print(f"sweep: job {rec['job']} FAILED [{' '.join(rec['overrides'])}]: {error}", flush=True)
 
     def on_multirun_end(self, config: DictConfig, **kwargs: Any) -> None:
+        """Print the sweep's summary."""
         global _SUMMARIZED
         print_summary(Path(config.hydra.sweep.dir))
         _SUMMARIZED = True

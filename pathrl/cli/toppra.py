@@ -19,6 +19,8 @@ from typing import Any
 from pathrl.cli.common import UserError, compose, run_cli, to_container
 from pathrl.storage import write_json_atomic
 
+__all__ = ["PAPER_EPISODES", "main", "main_", "print_summary", "summarize"]
+
 #: Default number of episodes of ``segments=paper`` (cycling over the paths).
 PAPER_EPISODES = 1200
 
@@ -111,6 +113,8 @@ def summarize(results, plan, paths, meta: dict[str, Any]) -> dict[str, Any]:
 
 
 def print_summary(report: dict[str, Any], out: Path) -> None:
+    """Print a baseline report as a table (episodes, durations, deviations, limit ratios, solve time; the Ruckig
+    tracking if run), then where it was written (`out`)."""
     from rich.console import Console
     from rich.markup import escape
     from rich.table import Table
@@ -231,6 +235,7 @@ def main_(argv: list[str]) -> dict[str, Any]:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``pathrl-toppra key=value ...`` (argv: sys.argv[1:]); returns the exit code."""
     return run_cli(main_, argv)
 
 

@@ -21,6 +21,8 @@ from pathrl.cli import sweep_report
 from pathrl.cli.store import register
 from pathrl.config.paths import CONF_DIR
 
+__all__ = ["main"]
+
 register()
 
 

@@ -19,6 +19,8 @@ from pathlib import Path
 
 from pathrl.cli.common import UserError, run_cli
 
+__all__ = ["build_parser", "inputs_of", "main", "parse_ids"]
+
 
 class _Parser(argparse.ArgumentParser):
     def error(self, message: str) -> None:  # one line, exit 2 (run_cli)
@@ -26,6 +28,7 @@ class _Parser(argparse.ArgumentParser):
 
 
 def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``pathrl-view`` (errors raise UserError)."""
     p = _Parser(prog="pathrl-view", description="Convert pathrl MCAP logs into Rerun recordings (.rrd).")
     p.add_argument("path", type=Path, help="run directory, episodes.mcap, run.mcap, industrial.mcap or trueadapt.mcap")
     p.add_argument("--save", type=Path, metavar="OUT.rrd", help="output file (default: next to each input)")
@@ -48,6 +51,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def parse_ids(text: str) -> list[int]:
+    """Episode ids from ``--episodes`` text like ``0,5,17`` (order kept, duplicates dropped); UserError if malformed or
+    negative."""
     try:
         ids = [int(x) for x in text.split(",") if x.strip()]
     except ValueError:
@@ -130,6 +135,7 @@ def _main(argv: list[str]) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Entry point of ``pathrl-view PATH [options]`` (argv: sys.argv[1:]); returns the exit code."""
     return run_cli(_main, argv)
 
 

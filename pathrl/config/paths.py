@@ -5,5 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+__all__ = ["CONF_DIR"]
+
 #: The Hydra config directory (``train.yaml``, ``robot/``, ``dataset/``, ...), package data of ``pathrl``.
 CONF_DIR = Path(__file__).resolve().parent.parent / "conf"

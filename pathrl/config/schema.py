@@ -15,15 +15,24 @@ from pathrl.config.migrate import CONFIG_VERSION
 from pathrl.envs.path_change_cfg import PathChangeCfg
 from pathrl.envs.tracking_cfg import EnvSettings
 
+__all__ = [
+    "CriticWarmupCfg", "DatasetAppCfg", "DatasetCfg", "KnotsCfg", "RewardCfg", "RobotCfg", "StdAnnealCfg", "TaskCfg",
+    "TcpCfg", "ToppraAppCfg", "TrainAppCfg", "WorkspaceCfg",
+]
+
 
 @dataclass
 class TcpCfg:
+    """A tool centre point: the URDF ``link`` it is fixed to and its ``offset`` in that link's frame (m)."""
+
     link: str = MISSING
     offset: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
 
 
 @dataclass
 class WorkspaceCfg:
+    """The Cartesian workspace box of a robot: [min, max] along ``x``, ``y``, ``z`` (m, base frame)."""
+
     x: list[float] = MISSING
     y: list[float] = MISSING
     z: list[float] = MISSING
@@ -31,6 +40,9 @@ class WorkspaceCfg:
 
 @dataclass
 class RobotCfg:
+    """A robot (``conf/robot/*.yaml``): URDF, joints, the path joints, kinematic limits (rad, rad/s, rad/s², rad/s³),
+    deviation weights, TCPs and workspace."""
+
     name: str = MISSING
     urdf: str = MISSING
     fixed_base: bool = True
@@ -49,6 +61,8 @@ class RobotCfg:
 
 @dataclass
 class DatasetCfg:
+    """A dataset (``conf/dataset/*.yaml``): its kind, directory, train / test sizes, seed and generator parameters."""
+
     name: str = MISSING
     kind: str = MISSING  # random | target_point | ball_balancing | imported
     path: str = MISSING  # directory of the dataset on disk (relative paths: to the working directory)
@@ -61,6 +75,9 @@ class DatasetCfg:
 
 @dataclass
 class KnotsCfg:
+    """How stored paths are resampled into knots (``conf/knots/*.yaml``): strategy, spacing (rad) and knots in the
+    state."""
+
     name: str = MISSING
     strategy: str = "curvature"  # curvature | distance | file
     spacing: float = 0.3
@@ -97,6 +114,8 @@ class ToppraAppCfg:
 
 @dataclass
 class RewardCfg:
+    """A reward (``conf/reward/*.yaml``): its terms, each with its weight and parameters."""
+
     name: str = MISSING
     terms: dict[str, dict[str, float]] = field(default_factory=dict)  # {term: {weight, <params>}}
 

@@ -11,6 +11,8 @@ import typing
 from collections.abc import Mapping
 from typing import Any
 
+__all__ = ["check_keys", "unknown_keys"]
+
 
 def _dataclass_of(tp: Any) -> type | None:
     """The dataclass in a field type (``X``, ``X | None``), else None (free-form or a plain value)."""

@@ -47,6 +47,10 @@ if TYPE_CHECKING:
     from pathrl.paths.pathset import PathSet
     from pathrl.robot.model import RobotSpec
 
+__all__ = ["CACHE_DIR", "Dataset", "DatasetError", "FORMAT", "OUT_OF_LIMITS", "Split", "apply_strategy", "cache_path",
+           "check_destination", "check_limits", "content_hash", "dataset_stats", "load_dataset", "load_pathset", "pack",
+           "path_lengths_and_gaps", "read_cache", "save_dataset", "strategy_key", "unpack", "write_cache"]
+
 FORMAT = "pathrl-dataset/1"
 META_FILE = "dataset.json"
 CACHE_DIR = ".cache"
@@ -68,6 +72,7 @@ class Split:
         return len(self.names)
 
     def items(self) -> list[tuple[str, np.ndarray]]:
+        """[(name, knots (K_i, M))] of the split."""
         return list(zip(self.names, self.knots, strict=True))
 
 
@@ -81,10 +86,12 @@ class Dataset:
 
     @property
     def content_hash(self) -> str:
+        """Hash of the dataset's paths (``content_hash`` of its metadata)."""
         return str(self.meta["content_hash"])
 
     @property
     def path_dof(self) -> int:
+        """Number of path joints M (from the knots; from the metadata if every split is empty)."""
         for split in self.splits.values():
             if len(split):
                 return int(split.knots[0].shape[1])
@@ -112,6 +119,7 @@ def pack(paths: Sequence[tuple[str, np.ndarray]]) -> dict[str, np.ndarray]:
 
 
 def unpack(arrays: Mapping[str, np.ndarray]) -> Split:
+    """The split packed by :func:`pack` (names, concatenated knots, offsets) as a :class:`Split`."""
     names = tuple(str(n) for n in arrays["names"])
     knots, offsets = arrays["knots"], arrays["offsets"]
     return Split(names, tuple(knots[offsets[i] : offsets[i + 1]] for i in range(len(names))))
@@ -384,6 +392,7 @@ def load_dataset(path: str | os.PathLike, robot: RobotSpec | None = None) -> Dat
 
 
 def strategy_key(knots: KnotStrategy) -> str:
+    """Cache key of a knot strategy, e.g. ``curvature_0.3_0.1``, ``distance_0.1`` or ``file``."""
     if knots.strategy == "file":
         return "file"
     if knots.strategy == "distance":
@@ -409,6 +418,7 @@ def write_cache(dataset: Dataset, split: str, knots: KnotStrategy, knots_list: S
 
 
 def read_cache(dataset: Dataset, split: str, knots: KnotStrategy) -> list[np.ndarray] | None:
+    """The cached knot arrays (K, D) of a split under `knots`; None if absent, damaged or out of date."""
     cache = cache_path(dataset, split, knots)
     if not cache.is_file():
         return None

@@ -26,6 +26,8 @@ from scipy.interpolate import BSpline
 from pathrl.dataset.io import Dataset, DatasetError, check_destination, dataset_stats, save_dataset
 from pathrl.robot.model import RobotSpec
 
+__all__ = ["find_spline_config", "import_kiemel", "read_episode"]
+
 SPLINE_CONFIG = "spline_config.json"
 
 
@@ -78,6 +80,8 @@ def read_episode(path: Path, path_dof: int | None = None) -> np.ndarray:
 
 
 def find_spline_config(src: Path) -> tuple[Path | None, dict[str, Any]]:
+    """``spline_config.json`` in `src` or its parent: (its path, its settings), or (None, {}) if there is none;
+    DatasetError if invalid."""
     for d in (src, src.parent):
         p = d / SPLINE_CONFIG
         if p.is_file():

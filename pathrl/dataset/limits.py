@@ -10,6 +10,8 @@ import numpy as np
 if TYPE_CHECKING:
     from pathrl.robot.model import RobotSpec
 
+__all__ = ["LIMIT_TOL", "limit_excess"]
+
 #: Knots may leave the robot's position range by this much (rad) and still count as inside it (rounding).
 LIMIT_TOL = 1e-6
 

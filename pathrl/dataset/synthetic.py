@@ -9,6 +9,8 @@ import numpy as np
 from pathrl.dataset.io import save_dataset
 from pathrl.robot.model import RobotSpec, load_robot_by_name
 
+__all__ = ["smooth_paths", "write_synthetic"]
+
 
 def smooth_paths(robot: RobotSpec, n: int, seed: int, knots: int = 40) -> list[tuple[str, np.ndarray]]:
     """`n` named paths of `knots` knots (K, M path joints): per joint a sine of random frequency (0.3-1 periods)

@@ -43,6 +43,13 @@ from scipy.interpolate import CubicSpline, make_interp_spline
 from pathrl.dataset.io import DatasetError, check_destination, dataset_stats, load_dataset, save_dataset
 from pathrl.robot.model import RobotSpec, load_robot
 
+__all__ = [
+    "FORE", "HAND", "SHOULDER_Z", "TrajectoryBank", "UPPER", "bank_from_arrays", "cartesian_path",
+    "format_trajectory_stats", "generate_chunk", "generate_trueadapt", "level_plate_ik", "level_plate_seed",
+    "load_trajectories", "mirror_variants", "reference_derivatives", "resolve_params", "sample_waypoints",
+    "time_optimal_samples", "trajectory_from_waypoints", "trajectory_stats",
+]
+
 KIND = "trueadapt"
 #: iiwa7 geometry behind the closed-form seed (pathrl/assets/urdf/iiwa7.urdf): shoulder height, upper arm,
 #: forearm, joint-6 axis to TCP (the plate centre).
@@ -381,9 +388,11 @@ class TrajectoryBank:
 
     @property
     def num(self) -> int:
+        """Number of trajectories."""
         return int(self.pos.shape[0])
 
     def to(self, device: str | torch.device) -> TrajectoryBank:
+        """The bank on `device`."""
         return TrajectoryBank(self.pos.to(device), self.acc.to(device), self.steps.to(device), self.dt)
 
 

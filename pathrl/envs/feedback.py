@@ -266,6 +266,8 @@ class AnalyticBall:
         return plate_pose(self.fk, q)
 
     def reset(self, env_ids: Tensor, q: Tensor) -> None:
+        """See :meth:`Feedback.reset`: a new ball (position, radius, rolling friction) at rest on the plate of envs
+        `env_ids`."""
         if len(env_ids) == 0:
             return
         k = len(env_ids)
@@ -286,6 +288,7 @@ class AnalyticBall:
         return o + (r @ local.unsqueeze(-1)).squeeze(-1)
 
     def step(self, q: Tensor, qd: Tensor, active: Tensor | None = None) -> FeedbackStep:
+        """See :meth:`Feedback.step`: roll the balls through the decision step's setpoints (N, C, D)."""
         if self.imu is not None:
             self.imu.step(q)
         q = q[:, self.stride - 1 :: self.stride]
@@ -320,13 +323,17 @@ class AnalyticBall:
         return FeedbackStep(obs=self.observe(), values=self.values(), failed=was_on & ~self.on)
 
     def values(self) -> dict[str, Tensor]:
+        """Task values per env (N,): ball distance from the centre (fraction of the usable half-size), on the plate (0 /
+        1) and drive."""
         rel = self.xy / self.half
         return {"ball_dist": rel.norm(dim=1), "ball_on_plate": self.on.to(torch.float64), "ball_drive": self.drive}
 
     def observe(self) -> Tensor:
+        """See :meth:`Feedback.observe`: the ball state (N, 4), clamped to [-1, 1]."""
         return ball_observation(self.prev_rel, self.xy / self.half, self.imu).clamp(-1.0, 1.0)
 
     def close(self) -> None:
+        """Nothing to release (torch model)."""
         pass
 
 
@@ -359,6 +366,7 @@ class FrozenSensor:
         self.frozen: Tensor | None = None
 
     def reset(self, env_ids: Tensor, q: Tensor) -> None:
+        """Reset the inner source and freeze the observation of envs `env_ids` at its new value."""
         self.inner.reset(env_ids, q)
         now = self.inner.observe()
         if self.frozen is None:
@@ -366,11 +374,14 @@ class FrozenSensor:
         self.frozen[env_ids] = now[env_ids]
 
     def step(self, q: Tensor, qd: Tensor, active: Tensor | None = None) -> FeedbackStep:
+        """Step the inner source; its values and failures pass, the observation stays frozen."""
         out = self.inner.step(q, qd, active)
         return FeedbackStep(obs=self.observe(), values=out.values, failed=out.failed)
 
     def observe(self) -> Tensor:
+        """The frozen observation (N, num_obs) (the inner one before the first reset)."""
         return self.inner.observe() if self.frozen is None else self.frozen
 
     def close(self) -> None:
+        """Close the inner source."""
         self.inner.close()

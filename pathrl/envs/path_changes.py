@@ -74,6 +74,7 @@ class PathChanges:
         return getattr(self.env, name)
 
     def reset(self) -> TensorDict:
+        """Reset all envs and schedule their path changes; the observations."""
         obs = self.env.reset()
         self._schedule(torch.arange(self.env.num_envs, device=self.env.device))
         return obs
@@ -108,6 +109,8 @@ class PathChanges:
         return tab["fits"]
 
     def step(self, actions: Tensor) -> tuple[TensorDict, Tensor, Tensor, dict]:
+        """Step the wrapped env, reschedule ended episodes and change due paths; (obs, rewards (N,), dones (N,),
+        extras)."""
         self._sync_tables()
         obs, rew, dones, extras = self.env.step(actions)
         ended = dones.nonzero().squeeze(1)

@@ -40,6 +40,9 @@ class ReferencePath:
 
 @dataclass
 class ReferenceStep:
+    """One step of the reference env: reward and its terms, terminated / time_out, arc length advanced `moved` (rad) and
+    the joint deviation max / mean over the step (rad)."""
+
     reward: float
     terms: dict[str, float]
     terminated: bool
@@ -99,6 +102,7 @@ class ReferenceTrackingEnv:
         self.a_min, self.a_max = rng[:, 0].copy(), rng[:, 1].copy()
 
     def observation(self) -> np.ndarray:
+        """The observation vector of the current state (the batched env's layout)."""
         lo, hi = self.robot.pos_limits[:, 0], self.robot.pos_limits[:, 1]
         parts = [2 * (self.pos - lo) / (hi - lo) - 1, self.vel / self.robot.vel_limits,
                  self.acc / self.robot.acc_limits]
@@ -118,6 +122,8 @@ class ReferenceTrackingEnv:
         return np.clip(np.concatenate([np.ravel(p) for p in parts]), -1, 1)
 
     def step(self, action: np.ndarray) -> ReferenceStep:
+        """Apply `action` (D,) in [-1, 1] (mapped into the valid acceleration range; the braking law
+        instead while braking) for one decision step."""
         action = np.asarray(action, dtype=np.float64)
         a1 = self.a_min + 0.5 * (np.clip(action, -1, 1) + 1) * (self.a_max - self.a_min)
         if self.braking:

@@ -144,12 +144,15 @@ TASK_VALUES: dict[str, tuple[str, ...]] = {"ball_centre": ("ball_dist", "ball_on
 
 @dataclass(frozen=True)
 class RewardTerm:
+    """A configured reward term: ``weight * fn(q, **params)`` per env (E,)."""
+
     name: str
     weight: float
     fn: RewardFn
     params: Mapping[str, Any]
 
     def __call__(self, q: StepQuantities) -> Tensor:
+        """The unweighted term (E,) of the step quantities `q`."""
         return self.fn(q, **self.params)
 
 

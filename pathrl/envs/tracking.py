@@ -316,9 +316,11 @@ class PathTrackingEnv(_VecEnvBase):
 
     @property
     def num_obs(self) -> int:
+        """Observation size."""
         return int(self._obs.shape[1])
 
     def get_observations(self) -> TensorDict:
+        """The current observations: ``{"policy": (N, num_obs)}``."""
         return TensorDict({"policy": self._obs}, batch_size=[self.num_envs], device=self.device)
 
     # ------------------------------------------------------------------ step
@@ -336,6 +338,8 @@ class PathTrackingEnv(_VecEnvBase):
 
     @env_scoped  # current() below: this env's limit_backend if it has one
     def step(self, actions: Tensor) -> tuple[TensorDict, Tensor, Tensor, dict]:
+        """One decision step of actions (N, D) in [-1, 1] (non-finite entries mapped in); (obs, rewards (N,), dones
+        (N,), extras)."""
         cfg = self.cfg
         # a NaN action entry acts as 0 and +-inf as +-1: every action, finite or not, maps into the valid range
         actions = torch.nan_to_num(actions.to(device=self.device, dtype=torch.float64), nan=0.0, posinf=1.0,

@@ -260,9 +260,11 @@ class TrueAdaptEnv(_VecEnvBase):
 
     @property
     def num_obs(self) -> int:
+        """Observation size."""
         return int(self._obs.shape[1])
 
     def get_observations(self) -> TensorDict:
+        """The current observations: ``{"policy": (N, num_obs)}``."""
         return TensorDict({"policy": self._obs}, batch_size=[self.num_envs], device=self.device)
 
     def ball_on(self) -> Tensor:
@@ -281,6 +283,8 @@ class TrueAdaptEnv(_VecEnvBase):
     # ------------------------------------------------------------------ step
     @env_scoped
     def step(self, actions: Tensor) -> tuple[TensorDict, Tensor, Tensor, dict]:
+        """One decision step of actions (N, D) in [-1, 1] (Eq. 8: scaled, clipped into the valid acceleration range);
+        (obs, rewards (N,), dones (N,), extras)."""
         cfg, lim = self.cfg, self.limits
         a1 = clip_to_range(actions.to(self.device), lim.acc, self.a_min, self.a_max)
         q_c, v_c, a_c = interpolate_step(self.pos, self.vel, self.acc, a1, cfg.dt, self.control_steps)

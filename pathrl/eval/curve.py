@@ -38,6 +38,7 @@ class Target:
     max_dev_cm: float
 
     def met(self, p: CurvePoint) -> bool:
+        """True if the point `p` reaches the target."""
         return p.duration_s <= self.max_duration_s and p.cart_pos_dev_mean_cm <= self.max_dev_cm \
             and p.limit_violations == 0
 

@@ -46,6 +46,9 @@ DATASETS = {"iiwa7": "datasets/iiwa7/random", "armar6": "datasets/armar6/random"
 
 @dataclass
 class FuzzResult:
+    """Outcome of a limit fuzz: steps and setpoints checked, violations per kind (and ``total``), restarts, brakes,
+    non-finite actions fed and wall time (s)."""
+
     robot: str
     decision_steps: int  # env steps taken (envs x steps)
     setpoints_checked: int  # (setpoint, joint) pairs checked

@@ -43,6 +43,7 @@ class EpisodeRecord:
 
     @property
     def duration_s(self) -> float:
+        """Episode duration (s): decision steps times the decision period."""
         return float(self.extra["dt"]) * self.steps
 
 

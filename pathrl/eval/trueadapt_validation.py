@@ -26,6 +26,9 @@ MODES = ("random", "max")
 
 @dataclass
 class ValidationResult:
+    """Outcome of a limit validation: trajectories, steps, mode, setpoints checked, violations per kind (and ``total``),
+    the largest |v| / v_max, |a| / a_max, |j| / j_max reached and wall time (s)."""
+
     trajectories: int
     steps: int  # decision steps per trajectory
     mode: str

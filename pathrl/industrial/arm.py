@@ -22,6 +22,11 @@ from __future__ import annotations
 
 import numpy as np
 
+__all__ = [
+    "ACC_LIMITS", "AXES", "JERK_LIMITS", "LINKS", "POS_LIMITS", "R_FLANGE", "TOOL_OFFSET", "VEL_LIMITS", "fk", "ik",
+    "ik_all", "ik_path", "jacobian", "within_limits",
+]
+
 #: Joint axes in the zero pose (base frame).
 AXES = np.array([[0, 0, 1], [0, 1, 0], [0, 1, 0], [1, 0, 0], [0, 1, 0], [1, 0, 0]], dtype=np.float64)
 #: Link vectors (mm): base -> axis 2, axis 2 -> 3, axis 3 -> 4 (offset), axis 4 -> wrist centre, wrist -> flange.

@@ -10,6 +10,8 @@ from pathrl.industrial.mpgd import MPGDParams
 from pathrl.industrial.rl import RLParams
 from pathrl.industrial.speed_search import SearchParams
 
+__all__ = ["IndustrialAppCfg", "build"]
+
 
 @dataclass
 class IndustrialAppCfg:

@@ -44,6 +44,8 @@ from scipy.signal import bilinear, lfilter
 from pathrl.industrial import arm
 from pathrl.industrial.program import PathSamples, Program, sample_path
 
+__all__ = ["ControllerParams", "Execution", "execute", "lookahead", "servo", "speed_limit", "time_law"]
+
 
 @dataclass(frozen=True)
 class ControllerParams:

@@ -16,6 +16,8 @@ from pathrl.industrial.speed_search import SearchParams, bisection_search
 from pathrl.industrial.tables import Table2Row, Table3Row
 from pathrl.industrial.trajectories import EVALUATION, Target, baseline_program, evaluation_targets
 
+__all__ = ["baseline_sweep", "run_speed", "run_table2", "run_table4", "select_targets", "sweep_markdown"]
+
 
 def select_targets(rows: Sequence[str]) -> list[Target]:
     """The evaluation targets named in `rows` (all if empty), in table order; ValueError on an unknown name."""

@@ -32,6 +32,11 @@ import numpy as np
 from pathrl.industrial import arm
 from pathrl.industrial.metrics import project
 
+__all__ = [
+    "FAIL_MM", "Matched", "N_FEATURES", "SLICES", "SUCCESS_MM", "action_steps", "f_jac", "features", "local",
+    "local_max", "match", "pca_shape", "regions", "rewards",
+]
+
 LOCAL_POINTS = 50
 N_FEATURES = 313
 FAIL_MM = 5.0

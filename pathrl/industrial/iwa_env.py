@@ -29,6 +29,8 @@ from pathrl.industrial.metrics import Errors, evaluate
 from pathrl.industrial.program import DEFAULT_SEED, Program
 from pathrl.industrial.trajectories import Target, baseline_program, waypoint_indices
 
+__all__ = ["IWAEpisode", "StepResult"]
+
 
 @dataclass
 class StepResult:

@@ -19,6 +19,11 @@ from dataclasses import asdict, dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
+__all__ = [
+    "Errors", "POS_SPEC_MM", "SPEED_TRIM", "evaluate", "orientation_errors", "position_errors", "project",
+    "speed_stats",
+]
+
 POS_SPEC_MM = 0.5
 ORI_SPEC_DEG = 3.0
 SPEED_STD_SPEC = 0.05
@@ -38,13 +43,16 @@ class Errors:
 
     @property
     def speed_std_ratio(self) -> float:
+        """Speed standard deviation over mean speed (inf if the mean is 0)."""
         return self.speed_std / self.mean_speed if self.mean_speed > 0 else float("inf")
 
     def meets_specs(self) -> bool:
+        """True if position (mm), orientation (deg) and speed-spread errors are all within spec."""
         return (self.max_pos_mm <= POS_SPEC_MM and self.max_ori_deg <= ORI_SPEC_DEG
                 and self.speed_std_ratio <= SPEED_STD_SPEC)
 
     def as_dict(self) -> dict[str, float]:
+        """The errors as a dict, with ``speed_std_ratio``."""
         return {**asdict(self), "speed_std_ratio": self.speed_std_ratio}
 
 

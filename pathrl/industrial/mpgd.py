@@ -32,6 +32,8 @@ from pathrl.industrial.metrics import POS_SPEC_MM, Errors, evaluate, position_er
 from pathrl.industrial.program import Program
 from pathrl.industrial.trajectories import Target, waypoint_indices
 
+__all__ = ["IWAResult", "MPGDParams", "error_peaks", "mpgd_update", "peak_step", "run_mpgd"]
+
 
 @dataclass(frozen=True)
 class MPGDParams:

@@ -14,6 +14,8 @@ from __future__ import annotations
 import torch
 from tensordict import TensorDict
 
+__all__ = ["PrioritizedBuffer"]
+
 
 class PrioritizedBuffer:
     """Ring buffer of `capacity` transitions with `n_obs` features and `n_act` actions (module doc)."""

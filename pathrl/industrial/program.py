@@ -23,6 +23,8 @@ from scipy.spatial.transform import Rotation, Slerp
 
 from pathrl.industrial import arm
 
+__all__ = ["DEFAULT_SEED", "PathSamples", "Program", "blend_polyline", "sample_path", "zone_radii"]
+
 
 @dataclass(frozen=True)
 class Program:

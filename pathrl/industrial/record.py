@@ -41,6 +41,11 @@ from pathrl.logging.schema import (
 )
 from pathrl.storage import atomic_write
 
+__all__ = [
+    "Iteration", "best_iteration", "mpgd_iterations", "observe", "policy_iterations", "record_optimisation",
+    "write_industrial_mcap",
+]
+
 FILE_NAME = "industrial.mcap"
 METHODS = ("mpgd", "rl")
 

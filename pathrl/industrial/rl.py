@@ -23,6 +23,8 @@ from pathrl.industrial.iwa_env import IWAEpisode
 from pathrl.industrial.metrics import POS_SPEC_MM
 from pathrl.industrial.mpgd import IWAResult
 
+__all__ = ["N_ACTIONS", "RLParams", "TD3Agent", "feature_mask", "run_policy_iwa"]
+
 N_ACTIONS = 3
 ABLATIONS = {"p_target": ("p_target",), "q_fjac": ("q", "f_jac"), "e": ("e",)}
 
@@ -129,10 +131,12 @@ class TD3Agent:
         return out
 
     def state_dict(self) -> dict:
+        """Networks, both optimizers and the update count (for a checkpoint)."""
         return {"loss": self.loss.state_dict(), "opt_q": self.opt_q.state_dict(), "opt_a": self.opt_a.state_dict(),
                 "updates": self.updates}
 
     def load_state_dict(self, state: dict) -> None:
+        """Restore what :meth:`state_dict` saved."""
         self.loss.load_state_dict(state["loss"])
         self.opt_q.load_state_dict(state["opt_q"])
         self.opt_a.load_state_dict(state["opt_a"])

@@ -32,6 +32,8 @@ from pathrl.logging.mcap_io import McapJsonWriter
 from pathrl.logging.schema import RUN_CONFIG, TRAIN_SCALARS
 from pathrl.storage import clean_leftovers, latest_valid_checkpoint, load_checkpoint, save_checkpoint
 
+__all__ = ["ACTOR_PREFIX", "POSE_SPEEDS", "load_agent", "ship_policy", "train", "training_target"]
+
 #: Speed command (mm/s) of the training trajectories per pose.
 POSE_SPEEDS = {1: 250.0, 2: 400.0, 3: 400.0}
 

@@ -32,6 +32,11 @@ from pathrl.industrial.timing import (
 )
 from pathrl.industrial.trajectories import Target, type1, type1_random
 
+__all__ = [
+    "RowResult", "SeedSummary", "VALIDATION_BASE", "parse_runs", "run_policy_rows", "seed_table_markdown", "spread",
+    "summarise", "validation_markdown", "validation_score", "validation_targets",
+]
+
 #: First seed of the validation curves; far above the training seeds 1000 * (seed + 1) + i.
 VALIDATION_BASE = 10_000_000
 

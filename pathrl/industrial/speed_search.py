@@ -19,6 +19,8 @@ from pathrl.industrial.mpgd import IWAResult, MPGDParams, run_mpgd
 from pathrl.industrial.program import Program
 from pathrl.industrial.trajectories import Target, baseline_program
 
+__all__ = ["SearchParams", "SearchResult", "bisection_search"]
+
 
 @dataclass(frozen=True)
 class SearchParams:

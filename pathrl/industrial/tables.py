@@ -13,6 +13,11 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+__all__ = [
+    "PAPER_RL", "PAPER_TABLE2", "PAPER_TABLE3", "PAPER_TABLE4", "Table2Row", "Table3Row", "ratios", "table2_markdown",
+    "table3_markdown", "table4_markdown",
+]
+
 #: Paper Table II per row: speed command (sim), baseline error sim / real (mm), MPGD (sim) error (mm),
 #: iterations, t_opt (s).
 PAPER_TABLE2: dict[str, tuple[float, float, float, float, int | None, float | None]] = {

@@ -28,6 +28,11 @@ from pathrl.industrial.program import DEFAULT_SEED, Program
 from pathrl.industrial.tables import PAPER_RL, PAPER_TABLE2
 from pathrl.industrial.trajectories import Target, baseline_program, waypoint_indices
 
+__all__ = [
+    "PAPER_EXECUTION_S", "PAPER_MPGD_DECISION_S", "PAPER_POLICY_DECISION_S", "RowTiming", "model_ratio",
+    "paper_per_iteration", "time_row", "time_rows", "timing_markdown",
+]
+
 #: The paper's costs (s): one RobotStudio execution (Sec. III-B, "about 12 seconds"), MPGD's and the policy's
 #: choice of actions per iteration (Sec. IV-C).
 PAPER_EXECUTION_S = 12.0

@@ -24,6 +24,11 @@ from scipy.spatial.transform import Rotation
 
 from pathrl.industrial.program import Program
 
+__all__ = [
+    "EVALUATION", "POSES", "SineParams", "TYPE1_MEMBERS", "Target", "baseline_program", "evaluation_targets",
+    "resample", "type1", "type1_random", "type2", "waypoint_indices",
+]
+
 #: Curve-frame placements: (origin mm, rotation as xyz Euler angles deg).
 POSES: dict[int, tuple[tuple[float, float, float], tuple[float, float, float]]] = {
     1: ((1800.0, 0.0, 700.0), (0.0, 0.0, 0.0)),
@@ -67,6 +72,7 @@ class Target:
 
     @property
     def z_axis(self) -> np.ndarray:
+        """Tool z axes (n, 3) along the target (third column of ``rot``)."""
         return self.rot[:, :, 2]
 
 

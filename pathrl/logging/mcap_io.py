@@ -19,6 +19,8 @@ from mcap.reader import NonSeekingReader, make_reader
 from mcap.well_known import MessageEncoding, SchemaEncoding
 from mcap.writer import CompressionType, Writer
 
+__all__ = ["McapJsonWriter", "dumps", "iter_messages", "read_messages", "topics_of"]
+
 GENERIC_SCHEMA = {"type": "object"}
 
 
@@ -35,6 +37,7 @@ def _default(obj: Any) -> Any:
 
 
 def dumps(obj: Any) -> bytes:
+    """Compact JSON bytes of `obj` (numpy arrays and scalars, tensors and paths converted; NaN / inf kept)."""
     return json.dumps(obj, default=_default, allow_nan=True, separators=(",", ":")).encode()
 
 
@@ -65,6 +68,7 @@ class McapJsonWriter:
         return self._channels[topic]
 
     def write(self, topic: str, obj: Any, log_time_ns: int | None = None) -> None:
+        """Write `obj` as JSON on `topic` at `log_time_ns` (default: now)."""
         cid = self.channel(topic)
         t = time.time_ns() if log_time_ns is None else int(log_time_ns)
         self._writer.add_message(channel_id=cid, log_time=t, publish_time=t, sequence=self._seq, data=dumps(obj))
@@ -76,6 +80,7 @@ class McapJsonWriter:
         self._file.flush()
 
     def close(self) -> None:
+        """Finish the file (idempotent)."""
         if not self._closed:
             self._writer.finish()
             self._file.close()
@@ -118,4 +123,5 @@ def read_messages(path: str | Path, topics: Iterable[str] | None = None) -> list
 
 
 def topics_of(path: str | Path) -> set[str]:
+    """The topics that have messages in the MCAP file at `path`."""
     return {t for t, _, _ in iter_messages(path)}

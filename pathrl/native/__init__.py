@@ -31,6 +31,8 @@ from pathlib import Path
 import torch
 from torch import Tensor
 
+__all__ = ["advance", "advance_supports", "applies", "available", "set_threads", "threads", "valid_range"]
+
 SOURCES = tuple(Path(__file__).with_name(name) for name in ("valid_range.c", "advance.c"))
 FLAGS = ("-O3", "-fPIC", "-shared", "-fno-fast-math", "-std=c99")
 MIN_ROWS_PER_THREAD = 256  # below this a second thread costs more than it saves

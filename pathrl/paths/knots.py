@@ -10,6 +10,8 @@ import numpy as np
 
 from pathrl.paths.spline import dedupe_knots, resample_by_curvature, resample_by_distance
 
+__all__ = ["KnotStrategy"]
+
 STRATEGIES = ("curvature", "distance", "file")
 
 
@@ -38,6 +40,7 @@ class KnotStrategy:
 
     @classmethod
     def from_cfg(cls, cfg: Mapping[str, Any]) -> KnotStrategy:
+        """The strategy of a ``knots`` config (other keys ignored)."""
         keys = {"strategy", "spacing", "base_spacing", "n_state"}
         return cls(**{k: v for k, v in cfg.items() if k in keys})
 

@@ -16,6 +16,8 @@ from torch import Tensor
 
 from pathrl.paths.spline import dedupe_knots, tabulate
 
+__all__ = ["PathSet", "build_pathset", "table_position"]
+
 
 @dataclass(frozen=True)
 class PathSet:
@@ -41,14 +43,17 @@ class PathSet:
 
     @property
     def num_paths(self) -> int:
+        """Number of paths P."""
         return len(self.names)
 
     @property
     def dof(self) -> int:
+        """Number of path joints M."""
         return int(self.knots.shape[-1])
 
     @property
     def device(self) -> torch.device:
+        """Device of the tensors."""
         return self.knots.device
 
     def max_knot_gap(self) -> float:
@@ -57,6 +62,7 @@ class PathSet:
         return float(gaps.max())
 
     def to(self, device: str | torch.device) -> PathSet:
+        """The path set on `device`."""
         return replace(
             self,
             knots=self.knots.to(device),

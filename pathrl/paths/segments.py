@@ -15,6 +15,8 @@ from torch import Tensor
 
 from pathrl.paths.pathset import PathSet
 
+__all__ = ["PROTOCOLS", "Segments", "evaluation_plan", "full_segments", "sample_segments"]
+
 PROTOCOLS = ("paper", "full")
 
 

@@ -11,6 +11,12 @@ from __future__ import annotations
 import numpy as np
 from scipy.interpolate import BSpline, make_interp_spline
 
+__all__ = [
+    "ARC_LENGTH_STEP", "PathError", "arc_length_table", "chord_params", "curvature_along", "dedupe_knots", "fit_spline",
+    "integrated_curvature", "knot_arc_lengths", "resample_by_curvature", "resample_by_distance", "sample_uniform",
+    "tabulate",
+]
+
 #: Parameter step of the dense polyline used to measure arc length, per rad of chord length.
 ARC_LENGTH_STEP = 1e-3
 

@@ -43,6 +43,7 @@ class MixedMLP(MLP):
         self.dtype = dtype
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
+        """(N, in) float32 -> (N, out) float32; hidden layers in ``dtype``."""
         *hidden, last = self
         with torch.autocast(x.device.type, dtype=self.dtype, enabled=self.dtype != torch.float32):
             for layer in hidden:

@@ -76,9 +76,11 @@ class ControllerObs:
         return obs
 
     def get_observations(self) -> TensorDict:
+        """The env's observations with the controller's action added."""
         return self._with_label(self.env.get_observations())
 
     def step(self, actions: Tensor) -> tuple[TensorDict, Tensor, Tensor, dict]:
+        """Step the env; (obs with the controller's action, rewards, dones, extras)."""
         obs, rewards, dones, extras = self.env.step(actions)
         self._steps += 1
         return self._with_label(obs), rewards, dones, extras
@@ -92,6 +94,7 @@ class ResidualEnv(ControllerObs):
         self.scale = float(scale)
 
     def step(self, actions: Tensor) -> tuple[TensorDict, Tensor, Tensor, dict]:
+        """Step with the controller's action plus ``scale`` times the residual `actions` (N, A), clamped to [-1, 1]."""
         base = self.label(self.env.get_observations())
         return super().step(compose(base, actions, self.scale))
 
@@ -104,6 +107,7 @@ class ResidualPolicy(nn.Module):
         self.controller, self.actor, self.scale = controller, actor, float(scale)
 
     def forward(self, obs: TensorDict) -> Tensor:
+        """Env actions (N, A): the controller's plus the actor's residual."""
         base = self.controller(obs).to(torch.float32)
         obs[BASE_GROUP] = base
         return compose(base, self.actor(obs), self.scale)

@@ -10,6 +10,8 @@ import numpy as np
 from pathrl.repro.tables import ROWS, TABLE_II
 from pathrl.storage import atomic_write
 
+__all__ = ["CURVES", "learning_curves", "load_episode", "pareto_table_ii", "path_overlay"]
+
 
 def _save(fig, path: Path) -> None:
     """Write a figure atomically (temp file + rename)."""

@@ -33,6 +33,8 @@ from pathrl.repro.tables import (
     Row,
 )
 
+__all__ = ["render_latex", "render_markdown"]
+
 TITLES = {
     TABLE_I: "Table I: tracking without sensory feedback",
     TABLE_I_TEST2: "Table I on a second test split (not in the paper: the generator's next seed, never trained "

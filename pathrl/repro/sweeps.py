@@ -38,6 +38,9 @@ class SweepsError(ValueError):
 
 @dataclass(frozen=True)
 class RowSpec:
+    """One row of a table: its key, the evaluation that fills it, and whether the paper lacks it or it is a model-based
+    controller."""
+
     key: str  # row key in the table (paper_tables.yaml)
     evaluation: Any  # an instance of the evaluation class given to load_table (pathrl.repro.tables.Evaluation)
     not_in_paper: bool = False  # the paper has no such row (shown with a dash for its value)
@@ -46,6 +49,9 @@ class RowSpec:
 
 @dataclass(frozen=True)
 class TableSpec:
+    """One table of ``pathrl/sweeps``: its name, rows, training sweep experiments and which published table it is
+    compared with."""
+
     name: str  # file stem, e.g. table_II (also the Hydra sweep: +sweep=table_II)
     rows: tuple[RowSpec, ...]
     train: tuple[str, ...] = ()  # experiments of its training sweep (none: no sweep)

@@ -13,6 +13,14 @@ from dataclasses import dataclass
 from pathrl.config.paths import CONF_DIR
 from pathrl.repro.sweeps import SWEEPS_DIR, load_tables, warm_starts
 
+__all__ = [
+    "AUTHORS_BUDGETS", "Baseline", "CONTROLLER_MODELS", "Evaluation", "NOT_IN_PAPER", "NO_SECOND_TEST_SET", "OURS_ONLY",
+    "PAPER_TABLE", "PATH_CHANGE", "PATH_ROBOT", "REALTIME", "ROWS", "Row", "SHORT_COLUMNS", "SWEEPS", "TABLE_FILES",
+    "TABLE_GREEDY", "TABLE_I", "TABLE_II", "TABLE_III", "TABLE_IV", "TABLE_IX", "TABLE_I_TEST2", "TABLE_PATH_CHANGE",
+    "TABLE_V", "TABLE_VI", "TABLE_VII", "TABLE_VIII", "TEST2_SUFFIX", "WARM_STARTS", "baselines", "evaluations",
+    "greedy_model", "select", "table_i_row", "warm_chain",
+]
+
 #: Columns of Tables II-IV (and the deviation columns of the Pareto plot).
 SHORT_COLUMNS = ("duration_s", "cart_pos_dev_mean_cm", "cart_pos_dev_max_cm", "cart_pos_dev_final_cm")
 
@@ -34,6 +42,7 @@ class Evaluation:
 
     @property
     def id(self) -> str:
+        """Key of the evaluation's results (``results["evaluations"]``)."""
         base = f"{self.model}_on_{self.dataset}" if self.generalization else self.model
         base = f"{base}_in_pybullet" if self.task else base
         base = f"{base}{TEST2_SUFFIX}" if self.second_test_set else base
@@ -51,6 +60,7 @@ class Evaluation:
 
     @property
     def baseline(self) -> Baseline:
+        """The TOPP-RA baseline on the same test split and episode plan."""
         return Baseline(self.data_robot, self.test_dir, _knot_positions(self.knots), self.segments)
 
 
@@ -65,6 +75,7 @@ class Baseline:
 
     @property
     def id(self) -> str:
+        """Key of the baseline's results (``results["baselines"]``)."""
         return f"toppra_{self.robot}_{self.dataset}_{self.segments}"
 
 
@@ -85,6 +96,8 @@ def _knot_positions(knots: str) -> str:
 
 @dataclass(frozen=True)
 class Row:
+    """A table row: the table and row key in ``paper_tables.yaml`` and the evaluation that fills it."""
+
     table: str  # key in paper_tables.yaml
     key: str  # row key in that table
     evaluation: Evaluation
@@ -188,4 +201,5 @@ def baselines(rows: tuple[Row, ...] = ROWS) -> list[Baseline]:
 
 
 def table_i_row(key: str) -> Row:
+    """The Table I row with key `key` (StopIteration if none)."""
     return next(r for r in ROWS if r.table == TABLE_I and r.key == key)

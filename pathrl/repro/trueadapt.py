@@ -17,6 +17,11 @@ from typing import Any
 
 import yaml
 
+__all__ = [
+    "AdaptEval", "AdaptRow", "COLUMNS", "EPISODES", "ROWS", "TRAIN_MISSING", "VALIDATION_ID", "collect", "eval_command",
+    "evaluations", "latex", "markdown", "names", "ours", "paper", "unavailable", "validation_command",
+]
+
 ADAPT_TABLE = "trueadapt_table_I"
 PAPER_FILE = Path(__file__).with_name("trueadapt_paper.yaml")
 ROBOT = "iiwa7"
@@ -59,11 +64,15 @@ class AdaptEval:
 
     @property
     def dataset(self) -> str:
+        """The dataset name, ``trueadapt_<task>``."""
         return f"trueadapt_{self.task}"
 
 
 @dataclass(frozen=True)
 class AdaptRow:
+    """A row of the TrueAdapt table: key, the paper's setting, what fills our cells and its evaluation (None: nothing
+    shipped, a dash)."""
+
     key: str  # row key in trueadapt_paper.yaml (or ours)
     setting: str  # the paper's setting
     ours: str  # what fills our cells

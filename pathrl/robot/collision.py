@@ -29,6 +29,8 @@ import pybullet as p
 
 from pathrl.robot.model import RobotSpec
 
+__all__ = ["CollisionChecker"]
+
 BASE = -1  # pybullet link index of the base
 
 

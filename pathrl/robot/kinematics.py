@@ -26,6 +26,8 @@ from torch import Tensor
 
 from pathrl.robot.model import RobotConfigError, RobotSpec
 
+__all__ = ["ForwardKinematics", "UrdfJoint", "matrix_to_quat", "parse_urdf_joints", "quat_angle_deg", "rpy_to_matrix"]
+
 MOVABLE_TYPES = ("revolute", "continuous", "prismatic")
 
 

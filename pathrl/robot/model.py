@@ -16,6 +16,8 @@ import numpy as np
 
 from pathrl.config.paths import CONF_DIR
 
+__all__ = ["CONF_DIR", "RobotConfigError", "RobotSpec", "Tcp", "load_robot", "load_robot_by_name", "resolve_urdf"]
+
 ASSET_DIR = Path(__file__).resolve().parent.parent / "assets" / "urdf"
 
 

@@ -23,6 +23,8 @@ from pathrl.envs.feedback import PLACE_MARGIN, PLATE_SIZE, USABLE_HALF
 from pathrl.robot.model import RobotSpec
 from pathrl.sim.scene import MotorScene, load_urdf_text, z_tilt_deg
 
+__all__ = ["BallOnPlateScene", "BallParams", "PLATE_SIZE", "USABLE_HALF", "plate_urdf", "sample_ball"]
+
 PLATE_MASS = 0.508  # kg
 ON_PLATE_HEIGHT = 0.01  # m
 
@@ -136,6 +138,7 @@ class BallOnPlateScene(MotorScene):
         return np.array([b[0] / USABLE_HALF[0], b[1] / USABLE_HALF[1]])
 
     def ball_is_on_plate(self) -> bool:
+        """True if the ball is within the plate's outline and near its surface."""
         b = self.ball_on_plate()
         inside = abs(b[0]) <= PLATE_SIZE[0] / 2 and abs(b[1]) <= PLATE_SIZE[1] / 2
         return bool(inside and -ON_PLATE_HEIGHT <= b[2] <= ON_PLATE_HEIGHT)

@@ -15,6 +15,8 @@ import pybullet as p
 from pathrl.robot.model import RobotSpec
 from pathrl.sim.scene import MotorScene, load_urdf, z_tilt_deg
 
+__all__ = ["StandingScene"]
+
 PELVIS_LINK = "root"
 FALL_TILT_DEG = 30.0
 
@@ -72,4 +74,5 @@ class StandingScene(MotorScene):
         return z_tilt_deg(self.pelvis_pose()[1])
 
     def fallen(self) -> bool:
+        """True if the pelvis tilts more than ``fall_tilt_deg``."""
         return self.tilt_deg() > self.fall_tilt_deg

@@ -12,6 +12,8 @@ from typing import Self
 import numpy as np
 import pybullet as p
 
+__all__ = ["FixedBaseScene", "MotorScene", "collision_only_urdf", "load_urdf", "load_urdf_text", "z_tilt_deg"]
+
 
 def z_tilt_deg(orientation_xyzw) -> float:
     """Angle between a frame's z axis and world z (deg)."""
@@ -87,6 +89,7 @@ class MotorScene:
         return np.array([s[0] for s in p.getJointStates(self.body, self.joint_ids, physicsClientId=self.cid)])
 
     def close(self) -> None:
+        """Disconnect from the physics server (idempotent)."""
         if self.cid is not None and self.cid >= 0:
             p.disconnect(physicsClientId=self.cid)
             self.cid = -1
@@ -109,6 +112,7 @@ class FixedBaseScene(MotorScene):
         self.joint_ids = [joints[n] for n in robot.joints]
 
     def reset(self, q: np.ndarray) -> None:
+        """Place the joints at `q` at rest and hold them there."""
         for j, x in zip(self.joint_ids, np.asarray(q, dtype=float), strict=True):
             p.resetJointState(self.body, j, float(x), 0.0, physicsClientId=self.cid)
         self._hold(q, np.zeros(len(self.joint_ids)))

@@ -23,6 +23,8 @@ from torch import Tensor
 from pathrl.envs.feedback import USABLE_HALF, FeedbackStep, PlateDrive, PlateIMU, ball_observation
 from pathrl.robot.model import RobotSpec
 
+__all__ = ["BASE_POS_SCALE", "PyBulletBall", "PyBulletStanding", "ScenePool"]
+
 #: Free-standing robot: observation scales (the authors' normalization) and the fall threshold.
 BASE_POS_SCALE = 0.2 / math.sqrt(3.0)  # m
 BASE_TILT_SCALE = 0.125  # rad
@@ -30,6 +32,7 @@ FALL_TILT_RAD = math.radians(30.0)
 
 
 def _make_scene(kind: str, robot: RobotSpec, seed: int, control_rate: float):
+    """A fresh PyBullet scene of `kind` (``ball_on_plate`` or standing) for `robot`, stepped at `control_rate` Hz."""
     if kind == "ball_on_plate":
         from pathrl.sim.ball_plate import BallOnPlateScene
 
@@ -60,6 +63,8 @@ def _read(kind: str, scenes) -> tuple[np.ndarray, np.ndarray]:
 
 def _worker(conn: Connection, kind: str, robot: RobotSpec, first: int, count: int, seed: int,
             control_rate: float) -> None:
+    """A worker process: builds scenes `first` .. `first + count - 1` (seeded `seed + index`), then answers ``reset`` /
+    ``step`` commands on `conn` with their readings until ``close``; a failed start is reported as one line."""
     import torch as _torch
 
     _torch.set_num_threads(1)
@@ -124,12 +129,14 @@ class ScenePool:
             self._died(conn)
 
     def _send(self, conn: Connection, msg: tuple) -> None:
+        """Send `msg` to a worker; one RuntimeError if it has died."""
         try:
             conn.send(msg)
         except OSError:
             self._died(conn)
 
     def _died(self, conn: Connection) -> NoReturn:
+        """Close the pool and raise one RuntimeError naming the dead worker's exit code."""
         proc = self.procs[self.conns.index(conn)]
         proc.join(timeout=5.0)
         self.close()
@@ -137,6 +144,7 @@ class ScenePool:
                            "out of memory: fewer envs per worker)") from None
 
     def _gather(self) -> tuple[Tensor, Tensor]:
+        """Readings (num_envs, k) and ok flags (num_envs,) of all workers, in env order."""
         parts = [self._recv(c) for c in self.conns]
         return (torch.as_tensor(np.concatenate([p[0] for p in parts])),
                 torch.as_tensor(np.concatenate([p[1] for p in parts])))
@@ -179,6 +187,8 @@ class ScenePool:
 
 
 class _PooledFeedback:
+    """Sensor feedback of `num_envs` PyBullet scenes of `kind` held by a :class:`ScenePool`; `ok` (num_envs,) bool."""
+
     kind = ""
 
     def __init__(self, robot: RobotSpec, num_envs: int, control_rate: float = 240.0, seed: int = 0,
@@ -187,6 +197,7 @@ class _PooledFeedback:
         self.ok = torch.zeros(num_envs, dtype=torch.bool)
 
     def close(self) -> None:
+        """Stop the pool's workers."""
         self.pool.close()
 
 

@@ -9,6 +9,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+__all__ = ["atomic_write", "write_json_atomic"]
+
 
 def atomic_write(path: Path, data: bytes | str | Callable[[Path], object]) -> None:
     """Write `data` (bytes, text, or a function that writes the file at the path it is given) to a temp file

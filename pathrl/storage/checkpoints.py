@@ -20,6 +20,11 @@ import torch
 
 from pathrl.storage.atomic import atomic_write
 
+__all__ = [
+    "CHECKPOINT_RE", "CheckpointError", "LEFTOVER_GLOBS", "checkpoint_iteration", "clean_leftovers", "content_digest",
+    "latest_checkpoint", "latest_valid_checkpoint", "load_checkpoint", "run_checkpoints", "save_checkpoint",
+]
+
 CHECKPOINT_RE = re.compile(r"^model_(\d+)\.pt$")
 DIGEST_KEY = "sha256"
 #: Leftovers of writes a kill interrupted: checkpoints, logs, configs, summaries (``pathrl.storage.atomic``).

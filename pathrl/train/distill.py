@@ -22,6 +22,8 @@ from torch import Tensor, nn
 from pathrl.envs.tracking import PathTrackingEnv
 from pathrl.policy.residual import ControllerObs
 
+__all__ = ["ControllerTeacher", "TEACHER_GROUP", "TeacherLabels"]
+
 #: Observation group that carries the teacher's action.
 TEACHER_GROUP = "teacher"
 
@@ -51,13 +53,17 @@ class ControllerTeacher(nn.Module):
 
     def forward(self, obs: TensorDict, masks: Tensor | None = None, hidden_state: object = None,
                 stochastic_output: bool = False) -> Tensor:
+        """The teacher's action: the observation group ``teacher`` (N, A)."""
         return obs[TEACHER_GROUP]
 
     def reset(self, dones: Tensor | None = None, hidden_state: object = None) -> None:
+        """Nothing to reset (not recurrent)."""
         pass
 
     def get_hidden_state(self) -> None:
+        """None (not recurrent)."""
         return None
 
     def detach_hidden_state(self, dones: Tensor | None = None) -> None:
+        """Nothing to detach (not recurrent)."""
         pass

@@ -16,6 +16,8 @@ from rsl_rl.utils.log_writer import LogWriter
 from pathrl.logging.mcap_io import McapJsonWriter, iter_messages
 from pathrl.logging.schema import RUN_CONFIG, TRAIN_SCALARS
 
+__all__ = ["McapLogWriter"]
+
 
 class McapLogWriter(LogWriter):
     """Buffers the scalars of one iteration and writes them as one message when the iteration changes."""
@@ -62,6 +64,7 @@ class McapLogWriter(LogWriter):
         self._values[tag] = float(scalar_value)
 
     def _emit(self) -> None:
+        """Write the current iteration's scalars as one ``TRAIN_SCALARS`` message and start a new one."""
         if self._step is not None and self._values:
             self.writer.write(TRAIN_SCALARS, {"iteration": self._step, "values": self._values})
             self.writer.flush()

@@ -37,6 +37,11 @@ from pathrl.storage import (
     write_json_atomic,
 )
 
+__all__ = [
+    "PathRLDistillationRunner", "PathRLRunner", "RESUME_MAY_CHANGE", "check_run_cfg", "config_change",
+    "float32_iteration", "resume_point", "rsl_train_cfg", "std_cap", "train",
+]
+
 
 def rsl_train_cfg(cfg: dict[str, Any], resume_from: int | None = None) -> dict[str, Any]:
     """RSL-RL train cfg: the agent config verbatim plus our MCAP log writer, which keeps the log up to the
@@ -163,6 +168,7 @@ class PathRLRunner(OnPolicyRunner):
 
     def load(self, path: str, load_cfg: dict | None = None, strict: bool = True,
              map_location: str | None = None) -> dict:
+        """Load the verified checkpoint at `path` (weights only) into the runner; see :meth:`load_state`."""
         return self.load_state(load_checkpoint(Path(path), map_location=map_location), load_cfg, strict)
 
     def load_state(self, loaded: dict, load_cfg: dict | None = None, strict: bool = True) -> dict:
@@ -189,6 +195,7 @@ class PathRLDistillationRunner(PathRLRunner, DistillationRunner):
     """rsl-rl's DistillationRunner (student-teacher behaviour cloning) with PathRLRunner's checkpoints."""
 
     def load_state(self, loaded: dict, load_cfg: dict | None = None, strict: bool = True) -> dict:
+        """As :meth:`PathRLRunner.load_state`; by default loads the student, its optimizer and the iteration."""
         # A controller teacher has an empty state dict, which rsl-rl's default (teacher included) takes for a
         # missing one; resume loads the student, its optimizer and the iteration.
         return super().load_state(loaded, load_cfg or {"student": True, "optimizer": True, "iteration": True}, strict)

@@ -13,6 +13,8 @@ import yaml
 
 from pathrl.storage import atomic_write, latest_valid_checkpoint, load_checkpoint, save_checkpoint, write_json_atomic
 
+__all__ = ["CURVE_PREFIXES", "curve_csv", "read_curve", "read_training_log", "ship", "training_curve", "training_stats"]
+
 
 def read_training_log(run_dir: Path, last_iter: int) -> tuple[int, list[dict[str, Any]]]:
     """Env steps per iteration (from the config) and the ``/train/scalars`` messages of run.mcap up to checkpoint

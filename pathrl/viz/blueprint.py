@@ -7,10 +7,14 @@ import numpy as np
 from pathrl.viz.reading import QUANTITIES, Episode, RobotInfo
 from pathrl.viz.rrd import UNITS, esc, is_time_tag, tag_entity
 
+__all__ = ["ACTIVE_TAB", "episodes_blueprint", "run_blueprint"]
+
 ACTIVE_TAB = 0
 
 
 def episodes_blueprint(robot: RobotInfo, episodes: list[Episode], timeline: str = "time"):
+    """The Rerun blueprint of evaluation episodes: 3D view and metrics, progress and deviation plots, the episode table
+    and one tab per joint (position ... jerk, within its limits); opens on `timeline`."""
     import rerun.blueprint as rrb
 
     def joint_view(j: int, name: str, q: str):

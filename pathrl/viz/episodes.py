@@ -77,6 +77,8 @@ from pathrl.viz.rrd import (
 )
 from pathrl.viz.urdf import anchor_to_robot_base, log_joint_transforms, log_robot
 
+__all__ = ["SUMMARY_COLS", "episodes_to_rrd", "metrics_markdown", "summary_markdown"]
+
 
 def episodes_to_rrd(
     src: Path, out: Path, ids: Sequence[int] | None = None, worst: int | None = None, timeline: str = "time"
@@ -288,6 +290,8 @@ def _fmt(v: Any) -> str:
 
 
 def metrics_markdown(e: Episode, start: float) -> str:
+    """Markdown table of one episode's metrics, with its start on the ``time`` timeline (`start` + its first time,
+    s)."""
     head = f"### Episode {e.episode}" + (f" — `{e.path}`" if e.path else "")
     rows = [("timeline `time` start", f"{start + e.t[0]:.2f} s"), ("decision steps", str(len(e.t) - 1))]
     rows += [(k, _fmt(v)) for k, v in e.metrics.items() if k not in ("episode", "path")]
@@ -305,6 +309,8 @@ SUMMARY_COLS = (
 
 
 def summary_markdown(episodes: list[Episode], starts: np.ndarray) -> str:
+    """Markdown table of all episodes: id, path, start on the ``time`` timeline (s) and the summary metrics they
+    have."""
     cols = [c for c in SUMMARY_COLS if any(c in e.metrics for e in episodes)]
     lines = ["| episode | path | start [s] | " + " | ".join(cols) + " |", "|---" * (3 + len(cols)) + "|"]
     for e, s in zip(episodes, starts, strict=True):

@@ -39,6 +39,11 @@ from pathrl.logging.schema import (
 from pathrl.viz.reading import ViewError
 from pathrl.viz.rrd import GREEN, GREY, RED, ConvertStats, removed_on_error, rerun_sdk, send_columns
 
+__all__ = [
+    "IndustrialRecording", "error_profile", "industrial_blueprint", "industrial_to_rrd", "magnified", "magnify_factor",
+    "read_industrial", "summary_markdown",
+]
+
 MM = 1e-3  # the file's mm in the recording's metres
 BLUE, ORANGE = (40, 110, 230), (255, 150, 30)
 PROFILE_BINS = 200
@@ -58,6 +63,7 @@ class IndustrialRecording:
 
     @property
     def iterations(self) -> list[int]:
+        """The recorded iterations, in order."""
         return sorted(self.executed)
 
 
@@ -153,6 +159,8 @@ def error_profile(rec: IndustrialRecording, k: int, bins: int = PROFILE_BINS) ->
 
 
 def summary_markdown(rec: IndustrialRecording, src: Path) -> str:
+    """Markdown summary of an industrial recording read from `src`: target, spec reached, best iteration, and per
+    iteration its errors (mm, deg) and speed spread (%)."""
     t, s = rec.target, rec.summary or {}
     best = s.get("best_iteration")
     head = [f"### {t.get('name', '?')}: {t.get('method_name', t.get('method', '?'))}", "",

@@ -29,6 +29,11 @@ from pathrl.logging.schema import (
     TRAIN_SCALARS,
 )
 
+__all__ = [
+    "Episode", "MCAP_MAGIC", "QUANTITIES", "RobotInfo", "ViewError", "check_mcap", "finite", "jerk", "kind_of",
+    "progress_and_deviation", "read_episodes", "read_run", "select_episodes",
+]
+
 MCAP_MAGIC = b"\x89MCAP0\r\n"
 QUANTITIES = ("position", "velocity", "acceleration", "jerk")
 
@@ -77,6 +82,8 @@ def _topics(path: Path) -> set[str]:
 
 @dataclass
 class RobotInfo:
+    """The robot of a recording: joint and path-joint names, limits per quantity (D, 2), URDF text and TCP links."""
+
     name: str
     joint_names: list[str]
     path_joints: list[str]
@@ -86,11 +93,15 @@ class RobotInfo:
 
     @property
     def path_index(self) -> np.ndarray:
+        """Indices (M,) of the path joints among all joints."""
         return np.array([self.joint_names.index(j) for j in self.path_joints], dtype=np.int64)
 
 
 @dataclass
 class Episode:
+    """One recorded episode: times (N,) s, joint position / velocity / acceleration (N, D), TCP positions (N, T, 3), the
+    reference (arc length (R,), joints (R, M), TCPs (R, T, 3)), path name, metrics and extra topics."""
+
     episode: int
     t: np.ndarray  # (N,) s
     q: np.ndarray  # (N, D)
@@ -211,6 +222,7 @@ def select_episodes(
 
 
 def finite(x: Any) -> bool:
+    """True for a finite int or float (not a bool)."""
     return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
 
 

@@ -15,6 +15,8 @@ from pathrl.viz.blueprint import run_blueprint
 from pathrl.viz.reading import ViewError, read_run
 from pathrl.viz.rrd import ConvertStats, is_time_tag, removed_on_error, rerun_sdk, send_columns, tag_entity
 
+__all__ = ["run_to_rrd"]
+
 
 def run_to_rrd(src: Path, out: Path) -> ConvertStats:
     """Convert the training curves (and config) of a ``run.mcap`` into the recording `out`.

@@ -22,6 +22,8 @@ from pathrl.logging.schema import (
     TRAIN_SCALARS,
 )
 
+__all__ = ["write_synthetic_episodes", "write_synthetic_run"]
+
 DT = 0.1  # decision step (s), as conf/env/tracking.yaml
 
 

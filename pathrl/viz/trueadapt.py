@@ -48,6 +48,10 @@ from pathrl.viz.rrd import (
 )
 from pathrl.viz.urdf import log_joint_transforms, log_robot
 
+__all__ = [
+    "AdaptEpisode", "border_position", "outcome_markdown", "read_trueadapt", "trueadapt_blueprint", "trueadapt_to_rrd",
+]
+
 BLUE = (30, 144, 255)
 STEP_FIELDS = ("reference", "position", "velocity", "acceleration", "reference_tcp", "tcp", "plate_quat_xyzw",
                "ball_xy", "ball_position", "ball_radius", "failed", "deviation")

@@ -12,6 +12,8 @@ import numpy as np
 from pathrl.viz.reading import Episode, RobotInfo
 from pathrl.viz.rrd import episode_times, esc, rerun_sdk, send_columns, time_column
 
+__all__ = ["MOVABLE", "anchor_to_robot_base", "log_joint_transforms", "log_robot", "resolve_urdf", "sanitize_urdf"]
+
 MOVABLE = ("revolute", "continuous", "prismatic")
 
 

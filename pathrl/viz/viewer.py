@@ -8,6 +8,8 @@ import sys
 from collections.abc import Iterable
 from pathlib import Path
 
+__all__ = ["rerun_command", "serve_web", "spawn_viewer"]
+
 
 def rerun_command() -> list[str]:
     """The bundled ``rerun`` CLI (next to the interpreter, else ``python -m rerun``)."""

@@ -15,6 +15,8 @@ from pathrl.dataset.io import DatasetError
 from pathrl.paths.spline import PathError, resample_by_distance, sample_uniform
 from pathrl.robot.model import RobotSpec
 
+__all__ = ["KIND", "ball_constraint_violation", "ball_paths", "check_ball_robot", "check_robot", "stored_paths"]
+
 KIND = "ball_balancing"
 
 

@@ -10,6 +10,8 @@ import torch
 
 from pathrl.robot.model import RobotSpec, load_robot
 
+__all__ = ["GenerationError", "GeneratorContext", "chunk_rngs", "process_context"]
+
 
 class GenerationError(RuntimeError):
     """A generator could not produce the requested paths (e.g. no valid start configurations)."""
@@ -82,6 +84,7 @@ class GeneratorContext:
 
     @property
     def limits(self):
+        """The robot's JointLimits within the generation position limits (built on first use)."""
         if self._limits is None:
             from dataclasses import replace
 
@@ -91,12 +94,14 @@ class GeneratorContext:
         return self._limits
 
     def in_collision(self, q: np.ndarray | torch.Tensor) -> np.ndarray:
+        """Per configuration (N, D) whether the robot collides (N,) bool."""
         q = q.detach().cpu().numpy() if isinstance(q, torch.Tensor) else np.asarray(q)
         if len(q) == 0:
             return np.zeros(0, dtype=bool)
         return np.asarray(self.checker.in_collision(np.ascontiguousarray(q, dtype=np.float64)), dtype=bool)
 
     def in_workspace(self, q: np.ndarray | torch.Tensor) -> np.ndarray:
+        """Per configuration (N, D) whether every TCP is inside the workspace box (N,) bool."""
         q = q.detach().cpu().numpy() if isinstance(q, torch.Tensor) else np.asarray(q)
         if len(q) == 0:
             return np.zeros(0, dtype=bool)

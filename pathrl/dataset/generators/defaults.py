@@ -13,6 +13,8 @@ from typing import Any
 
 from pathrl.dataset.io import DatasetError
 
+__all__ = ["APPROACHES", "DEFAULT_PARAMS", "KINDS", "resolve_params"]
+
 KINDS = ("random", "target_point", "ball_balancing")
 APPROACHES = ("saturated", "pursuit", "pd")  # target_point motion toward each goal
 

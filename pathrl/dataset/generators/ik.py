@@ -9,6 +9,8 @@ import torch
 
 from pathrl.dataset.generators.context import GenerationError, GeneratorContext
 
+__all__ = ["sample_starts", "solve_ik"]
+
 
 def sample_starts(ctx: GeneratorContext, rng: np.random.Generator, n: int, max_draws: int = 200_000) -> np.ndarray:
     """n configurations uniform in the position limits, collision free, every TCP in the workspace box."""

@@ -9,6 +9,8 @@ from typing import Any
 
 from pathrl.dataset.io import DatasetError
 
+__all__ = ["Job", "SPLIT_IDS", "chunk_jobs", "run_jobs", "split_counts"]
+
 SPLIT_IDS = {"train": 0, "test": 1}
 
 

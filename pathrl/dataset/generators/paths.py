@@ -27,6 +27,8 @@ from pathrl.dataset.io import (
 from pathrl.paths.knots import KnotStrategy
 from pathrl.robot.model import RobotSpec, load_robot
 
+__all__ = ["generate_chunk", "generate_paths"]
+
 
 def _path_metrics(knots_list: Sequence[np.ndarray]) -> np.ndarray:
     counts, lengths, gaps = path_lengths_and_gaps(knots_list)

@@ -13,6 +13,8 @@ from pathrl.dataset.generators.context import GeneratorContext
 from pathrl.dataset.generators.rollout import stored_rollout_paths
 from pathrl.robot.model import RobotSpec
 
+__all__ = ["KIND", "check_robot", "stored_paths"]
+
 KIND = "random"
 
 

@@ -19,6 +19,8 @@ from pathrl.dataset.generators.context import GeneratorContext
 from pathrl.dataset.generators.ik import sample_starts
 from pathrl.paths.spline import dedupe_knots, resample_by_distance, sample_uniform
 
+__all__ = ["MotionPolicy", "path_valid", "rollout_paths", "stored_rollout_paths"]
+
 
 class MotionPolicy(Protocol):
     """Actions of b candidate motions; `rows` index the candidates a call is about."""
