@@ -18,7 +18,7 @@ from pathlib import Path
 
 from pathrl.cli.common import UserError, parse_key_values, run_cli
 
-__all__ = ["main"]
+__all__ = ["OFFSET_WARN_RAD", "main"]
 
 USAGE = ("usage: pathrl-eval run_dir=RUN [dataset=NAME | dataset.path=DIR] [split=test] [episodes=N] "
          "[segments=paper|full] [seed=S] [out=DIR] [record=true|false] [task=ball_on_plate|standing] "
@@ -104,6 +104,21 @@ def _print_table(m: dict) -> None:
         v = m[k]
         t.add_row(k, f"{v:.3f}" if isinstance(v, float) else str(v))
     Console().print(t)
+    if "per_joint" in m:
+        print(_offset_line(m["per_joint"]))
+
+
+#: A path joint whose mean signed error (commanded minus reference) exceeds this is listed under the table (rad).
+OFFSET_WARN_RAD = 0.02
+
+
+def _offset_line(per_joint: dict[str, dict[str, float]]) -> str:
+    """One line naming the joints held off the path by more than :data:`OFFSET_WARN_RAD` on average (or none)."""
+    from pathrl.eval.metrics import offset_joints
+
+    big = offset_joints(per_joint, OFFSET_WARN_RAD)
+    listed = ", ".join(f"{n} {per_joint[n]['offset_rad']:+.3f} ({100 * per_joint[n]['share']:.0f} %)" for n in big)
+    return f"joint offsets > {OFFSET_WARN_RAD} rad (mean signed error, share of squared deviation): {listed or 'none'}"
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -23,7 +23,7 @@ from pathrl.envs.factory import task_cfg
 from pathrl.envs.registry import EVAL_ENV, make_env
 from pathrl.envs.terminations import TerminationReason
 from pathrl.envs.tracking import PathTrackingEnv
-from pathrl.eval.metrics import METRIC_KEYS, episode_deviations
+from pathrl.eval.metrics import METRIC_KEYS, matched_samples, per_joint_errors, sample_deviations
 from pathrl.eval.rollout import EpisodeRecord, rollout
 from pathrl.limits.backend import current
 from pathrl.limits.check import limit_violations
@@ -287,10 +287,13 @@ def _finish(records, rollout_s, env, robot, paths, ds_path, split, segments, see
     t0 = time.perf_counter()
     fk = ForwardKinematics(robot)
     limits = JointLimits.from_robot(robot)
-    devs = episode_deviations([r.setpoints for r in records], torch.as_tensor(robot.path_index), paths,
-                              [r.path for r in records], [r.start_s for r in records], [r.end_s for r in records], fk)
+    setpoints, path_index = [r.setpoints for r in records], torch.as_tensor(robot.path_index)
+    matched = matched_samples(setpoints, path_index, paths, [r.path for r in records], [r.start_s for r in records],
+                              [r.end_s for r in records])
+    devs = sample_deviations(setpoints, matched, path_index, fk)
     per_episode = [_episode_metrics(r, dev, env, limits, paths) for r, dev in zip(records, devs, strict=True)]
-    metrics = _aggregate(per_episode, robot, ds_path, split, segments, seed)
+    per_joint = per_joint_errors(torch.cat([e - r for e, r in matched]), robot.path_joints)
+    metrics = _aggregate(per_episode, robot, ds_path, split, segments, seed, per_joint)
     if task_run_cfg is not None:
         t = task_cfg(task_run_cfg)
         backend = type(getattr(env.feedback, "inner", env.feedback)).__name__
@@ -349,7 +352,7 @@ def _task_failure(r: EpisodeRecord, ok_value: str) -> dict[str, Any]:
 
 
 def _aggregate(per: list[dict[str, Any]], robot: RobotSpec, dataset: str, split: str, segments: str,
-               seed: int) -> dict[str, Any]:
+               seed: int, per_joint: dict[str, dict[str, float]] | None = None) -> dict[str, Any]:
     def mean(key: str) -> float:
         return float(np.mean([p[key] for p in per]))
 
@@ -362,6 +365,8 @@ def _aggregate(per: list[dict[str, Any]], robot: RobotSpec, dataset: str, split:
     out["duration_end_of_path_s"] = float(np.mean(reached)) if reached else None  # over episodes that got there
     out["reached_end_pct"] = 100.0 * len(reached) / len(per)
     out["limit_violations"] = int(sum(p["limit_violations"] for p in per))
+    if per_joint is not None:  # offset / RMS / share of each path joint over all samples (metrics.per_joint_errors)
+        out["per_joint"] = per_joint
     out["per_episode"] = per
     return out
 

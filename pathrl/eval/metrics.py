@@ -5,7 +5,9 @@ is resampled every `sample_step` rad of its own arc length (first sample dropped
 sample k at arc length s_k is compared with the reference at start_s + s_k (the end knot beyond the
 segment end). Joint deviation: unweighted Euclidean norm (rad). Cartesian: TCP position distance (cm)
 and orientation angle (deg) via forward kinematics; mean and max over samples and TCPs, final = the
-last sample averaged over TCPs.
+last sample averaged over TCPs. Per joint (:func:`per_joint_errors`, pooled over all samples of all
+episodes): the mean signed error (commanded minus reference), its RMS and the joint's share of the squared
+joint deviation, which show constant offsets that the norms above hide.
 """
 
 from __future__ import annotations
@@ -18,7 +20,8 @@ from torch import Tensor
 from pathrl.paths.pathset import PathSet
 from pathrl.robot.kinematics import ForwardKinematics, quat_angle_deg
 
-__all__ = ["METRIC_KEYS", "episode_deviation", "episode_deviations", "resample_polyline"]
+__all__ = ["METRIC_KEYS", "episode_deviation", "episode_deviations", "matched_samples", "offset_joints",
+           "per_joint_errors", "resample_polyline", "sample_deviations"]
 
 
 METRIC_KEYS = (
@@ -72,13 +75,40 @@ def episode_deviations(
     sample_step: float = 0.01,
 ) -> list[dict[str, float]]:
     """:func:`episode_deviation` of many episodes (setpoints (T_i, D) each), with one batched FK pass."""
-    joint, full_exec, full_ref = [], [], []
+    matched = matched_samples(setpoints, path_index, paths, path, start_s, end_s, sample_step)
+    return sample_deviations(setpoints, matched, path_index, fk)
+
+
+def matched_samples(
+    setpoints: Sequence[Tensor],
+    path_index: Tensor,
+    paths: PathSet,
+    path: Sequence[int],
+    start_s: Sequence[float],
+    end_s: Sequence[float],
+    sample_step: float = 0.01,
+) -> list[tuple[Tensor, Tensor]]:
+    """Per episode (executed, reference) path-joint samples at equal arc length, (K_i, M) each, float64, rad."""
+    out = []
     for q, p, s0, s1 in zip(setpoints, path, start_s, end_s, strict=True):
-        q_all = q.to(torch.float64)
-        q_exec, s = resample_polyline(q_all[:, path_index], sample_step)
+        q_exec, s = resample_polyline(q.to(torch.float64)[:, path_index], sample_step)
         s_ref = torch.clamp(s0 + s, max=s1)
         idx = torch.full((len(s),), p, dtype=torch.long, device=paths.device)
-        q_ref = paths.position_at(idx, s_ref.to(paths.device)).to(q_exec)
+        out.append((q_exec, paths.position_at(idx, s_ref.to(paths.device)).to(q_exec)))
+    return out
+
+
+def sample_deviations(
+    setpoints: Sequence[Tensor],
+    matched: Sequence[tuple[Tensor, Tensor]],
+    path_index: Tensor,
+    fk: ForwardKinematics,
+) -> list[dict[str, float]]:
+    """Deviation metrics (:data:`METRIC_KEYS`) per episode from its :func:`matched_samples`; `setpoints` (T_i, D)
+    give the non-path joints (as at the last setpoint) for the batched FK pass."""
+    joint, full_exec, full_ref = [], [], []
+    for q, (q_exec, q_ref) in zip(setpoints, matched, strict=True):
+        q_all = q.to(torch.float64)
         joint.append((q_exec - q_ref).norm(dim=1))
         # Full-robot configurations for FK: non-path joints (e.g. legs) as executed at the last setpoint.
         full_exec.append(_embed(q_exec, q_all, path_index))
@@ -99,6 +129,27 @@ def episode_deviations(
             "cart_rot_dev_final_deg": float(rot[-1].mean()),
         })
     return out
+
+
+def per_joint_errors(errors: Tensor, joint_names: Sequence[str]) -> dict[str, dict[str, float]]:
+    """Per path joint, over all samples of `errors` (N, M) = executed minus reference (rad): ``offset_rad`` (mean
+    signed error), ``rms_rad`` (root mean square error) and ``share`` (the joint's part of the summed squared joint
+    deviation; the shares sum to 1, all 0 when there is no error)."""
+    if errors.ndim != 2 or errors.shape[1] != len(joint_names):
+        raise ValueError(f"errors {tuple(errors.shape)}: expected (N, {len(joint_names)}), one column per joint")
+    e = errors.to(torch.float64)
+    sq = (e * e).sum(0)  # (M,)
+    total = float(sq.sum())
+    offset, rms = e.mean(0).tolist(), (sq / max(len(e), 1)).sqrt().tolist()
+    share = (sq / total).tolist() if total > 0 else [0.0] * len(joint_names)
+    return {n: {"offset_rad": o, "rms_rad": r, "share": f}
+            for n, o, r, f in zip(joint_names, offset, rms, share, strict=True)}
+
+
+def offset_joints(per_joint: dict[str, dict[str, float]], threshold: float = 0.02) -> list[str]:
+    """Names of the joints of :func:`per_joint_errors` with |offset| > `threshold` (rad), largest first."""
+    big = [n for n, v in per_joint.items() if abs(v["offset_rad"]) > threshold]
+    return sorted(big, key=lambda n: -abs(per_joint[n]["offset_rad"]))
 
 
 def _embed(q_path: Tensor, q_all: Tensor, path_index: Tensor) -> Tensor:
