@@ -3,7 +3,9 @@
 Every evaluation (a shipped policy on a test split) and every TOPP-RA baseline (the same split, knots and
 episode plan) runs once, even when several table rows use it. Outputs (written atomically):
 results/tables.md, tables.csv, tables.tex, figures/*.png, raw/<evaluation>/metrics.json, raw/<toppra>.json;
-each step's console output goes to results/logs/<step>.log. The TrueAdapt paper's Table I (pathrl/repro/trueadapt.py):
+a policy's evaluation also writes the SHA-256 of its model and test split beside its result (raw/<evaluation>/
+inputs.json, pathrl/repro/inputs.py): --reuse re-evaluates a result whose inputs changed. Each step's console
+output goes to results/logs/<step>.log. The TrueAdapt paper's Table I (pathrl/repro/trueadapt.py):
 its shipped policies and controllers on the committed test splits, the ball in PyBullet, and the 10^5-trajectory
 limit validation (raw/trueadapt_validation.json); --only takes their names too (e.g. trueadapt_validation).
 The rows are sweeps/<table>.yaml (pathrl/repro/sweeps.py); --only also takes a table's file name (`make table
@@ -61,6 +63,7 @@ try:  # the rows are read from sweeps/<table>.yaml at import: a broken file is i
     )
 except SweepsError as exc:
     sys.exit(f"error: {exc}")
+from pathrl.repro.inputs import fingerprint, record, stale  # noqa: E402
 from pathrl.storage import atomic_write  # noqa: E402
 from pathrl.train.ship import read_curve  # noqa: E402
 
@@ -180,8 +183,7 @@ def build_plan(args: argparse.Namespace, profile: Profile, lay: Layout) -> Plan:
         plan.add("evaluate", f"TOPP-RA {b.robot}/{b.dataset} ({b.segments})",
                  lambda b=b: toppra(b, profile, lay, args.reuse, logs, toppra_workers))
     for a in adapt.evaluations(only):  # TrueAdapt Table I (the ball in PyBullet), then its limit validation
-        plan.add("evaluate", f"evaluate {a.id}", lambda a=a: run_script(adapt.eval_command(
-            a, ROOT, lay.out / "raw", profile.episodes or adapt.EPISODES, args.reuse), logs / f"eval_{a.id}.log"))
+        plan.add("evaluate", f"evaluate {a.id}", lambda a=a: adapt_evaluate(a, profile, lay, args.reuse, logs))
     if only is None or adapt.VALIDATION_ID in only:
         n = 1000 if profile.name == "quick" else 100_000
         plan.add("evaluate", "TrueAdapt limit validation", lambda: run_script(adapt.validation_command(
@@ -218,6 +220,27 @@ def industrial(lay: Layout, reuse: bool, logs: Path) -> None:
             continue
         shown = out.relative_to(ROOT) if out.is_relative_to(ROOT) else out  # as the table's "Measured with" line
         sh([str(BIN / "pathrl-industrial"), command, *overrides, f"{key}={shown}"], logs / f"industrial_{out.stem}.log")
+
+
+def kept(result: Path, inputs: dict[str, str], reuse: bool, label: str) -> bool:
+    """Whether --reuse keeps `result` (made from `inputs`: pathrl.repro.inputs.stale); when its inputs changed,
+    the console says it is re-evaluated."""
+    why = stale(result, inputs) if reuse else "no --reuse"
+    if reuse and why is not None and why != "no result":
+        print(f"{label}: {why}: re-evaluating", flush=True)
+    return why is None
+
+
+def adapt_evaluate(a: adapt.AdaptEval, profile: Profile, lay: Layout, reuse: bool, logs: Path) -> None:
+    """A TrueAdapt evaluation (skipped when its model or split is missing), its inputs recorded beside it."""
+    result = lay.out / "raw" / a.id / "metrics.json"
+    data = ROOT / ("datasets" if a.split == "test" else "data") / adapt.ROBOT / a.dataset
+    inputs = fingerprint(ROOT, None if a.model is None else ROOT / "models" / a.model, data)
+    cmd = adapt.eval_command(a, ROOT, lay.out / "raw", profile.episodes or adapt.EPISODES,
+                             kept(result, inputs, reuse, a.id))
+    run_script(cmd, logs / f"eval_{a.id}.log")
+    if cmd is not None:
+        record(result, inputs)
 
 
 def run_script(cmd: list[str] | None, log: Path) -> None:
@@ -260,11 +283,15 @@ def path_change_file(lay: Layout, key: str) -> Path:
 
 def path_change(key: str, model: str, split: str, profile: Profile, lay: Layout, reuse: bool, logs: Path) -> None:
     out = path_change_file(lay, key)
-    if (reuse and out.is_file()) or not (lay.models / model / "model.pt").is_file():
+    if not (lay.models / model / "model.pt").is_file():
+        return
+    inputs = fingerprint(ROOT, lay.models / model, lay.test_data / split)
+    if kept(out, inputs, reuse, f"path changes {key}"):
         return
     episodes = 10 if profile.name == "quick" else 200
     sh([sys.executable, "-m", "pathrl.eval.path_change", str(lay.models / model), str(lay.test_data / split),
         str(out), "--episodes", str(episodes)], logs / f"{out.stem}.log")
+    record(out, inputs)
 
 
 def train_and_ship(model: str, e: Evaluation, profile: Profile, lay: Layout, logs: Path) -> None:
@@ -304,7 +331,10 @@ def evaluate(e: Evaluation, profile: Profile, lay: Layout, reuse: bool, logs: Pa
     raw = lay.out / "raw" / e.id
     if not shipped(e, lay):
         return
-    if reuse and (raw / "metrics.json").is_file():
+    # the model's files, those of the policy its controller config names, and the test split (pathrl/repro/inputs.py);
+    # a result without recorded inputs (made before they were recorded) is kept, its next evaluation records them
+    inputs = fingerprint(ROOT, model, lay.test_data / e.data_robot / e.test_dir)
+    if kept(raw / "metrics.json", inputs, reuse, e.id):
         return
     data = rel(lay.test_data / e.data_robot / e.test_dir)
     cmd = [str(BIN / "pathrl-eval"), f"run_dir={rel(model)}", f"dataset.path={data}",
@@ -318,6 +348,7 @@ def evaluate(e: Evaluation, profile: Profile, lay: Layout, reuse: bool, logs: Pa
     if e.open_loop:
         cmd.append("open_loop=true")
     sh(cmd, logs / f"eval_{e.id}.log")
+    record(raw / "metrics.json", inputs)
 
 
 def toppra(b: Baseline, profile: Profile, lay: Layout, reuse: bool, logs: Path, workers: int) -> None:

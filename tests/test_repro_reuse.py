@@ -1,0 +1,181 @@
+"""`reproduce_tables.py --reuse` keeps a result only while its inputs are unchanged (pathrl.repro.inputs)."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import sys
+from pathlib import Path
+
+import pytest
+
+from pathrl.repro.inputs import fingerprint, inputs_file, record, stale
+from pathrl.repro.tables import Evaluation
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _model(root: Path, name: str, weights: bytes | None, policy: str | None = None) -> Path:
+    """A fake models/<name>: config.yaml (naming `policy` under controller) and model.pt (None: a controller)."""
+    d = root / "models" / name
+    d.mkdir(parents=True, exist_ok=True)
+    ctrl = "" if policy is None else f"controller:\n  name: balance\n  policy: {policy}\n"
+    (d / "config.yaml").write_text(f"experiment: {name}\n{ctrl}")
+    if weights is not None:
+        (d / "model.pt").write_bytes(weights)
+    return d
+
+
+@pytest.fixture
+def repo(tmp_path: Path) -> Path:
+    """A fake repository: a controller naming models/policy_a, policies a and b, a test split."""
+    _model(tmp_path, "policy_a", b"weights a")
+    _model(tmp_path, "policy_b", b"weights b")
+    _model(tmp_path, "balance", None, policy="models/policy_a")
+    data = tmp_path / "datasets" / "armar4" / "target_point"
+    data.mkdir(parents=True)
+    (data / "dataset.json").write_text('{"seed": 0}')
+    (data / "test.npz").write_bytes(b"paths")
+    return tmp_path
+
+
+def _split(root: Path) -> Path:
+    return root / "datasets" / "armar4" / "target_point"
+
+
+def test_fingerprint_follows_the_controller_policy(repo: Path):
+    fp = fingerprint(repo, repo / "models" / "balance", _split(repo))
+    assert sorted(fp) == ["datasets/armar4/target_point/dataset.json", "datasets/armar4/target_point/test.npz",
+                          "models/balance/config.yaml", "models/policy_a/config.yaml", "models/policy_a/model.pt"]
+    assert fp == fingerprint(repo, Path("models/balance"), Path("datasets/armar4/target_point"))  # relative to root
+    assert all(len(h) == 64 for h in fp.values())
+
+
+def test_changed_policy_or_weights_means_re_evaluate(repo: Path):
+    result = repo / "results" / "raw" / "balance" / "metrics.json"
+    result.parent.mkdir(parents=True)
+    result.write_text("{}")
+    inputs = fingerprint(repo, repo / "models" / "balance", _split(repo))
+    record(result, inputs)
+    assert json.loads((result.parent / "inputs.json").read_text())["files"] == inputs
+    assert stale(result, fingerprint(repo, repo / "models" / "balance", _split(repo))) is None
+
+    _model(repo, "balance", None, policy="models/policy_b")  # the controller now drives another policy
+    why = stale(result, fingerprint(repo, repo / "models" / "balance", _split(repo)))
+    assert why is not None and why.startswith("inputs changed") and "models/policy_b/model.pt" in why
+
+    _model(repo, "balance", None, policy="models/policy_a")
+    (repo / "models" / "policy_a" / "model.pt").write_bytes(b"retrained a")  # new weights of the same policy
+    why = stale(result, fingerprint(repo, repo / "models" / "balance", _split(repo)))
+    assert why == "inputs changed (models/policy_a/model.pt)"
+
+
+def test_missing_fingerprint_is_reusable_missing_result_is_not(repo: Path):
+    inputs = fingerprint(repo, repo / "models" / "policy_a", _split(repo))
+    result = repo / "results" / "raw" / "policy_a" / "metrics.json"
+    assert stale(result, inputs) == "no result"
+    result.parent.mkdir(parents=True)
+    result.write_text("{}")
+    assert stale(result, inputs) is None  # made before inputs were recorded (the committed results): kept
+    inputs_file(result).write_text("not json")
+    assert stale(result, inputs) == "inputs changed (inputs.json unreadable)"
+
+
+def test_sidecar_of_a_file_result(tmp_path: Path):
+    assert inputs_file(tmp_path / "path_change_iiwa7_random.json") == tmp_path / "path_change_iiwa7_random.inputs.json"
+    assert inputs_file(tmp_path / "x" / "metrics.json") == tmp_path / "x" / "inputs.json"
+
+
+def _tool(monkeypatch):
+    """tools/reproduce_tables.py as a module (registered while imported: its dataclasses look themselves up)."""
+    spec = importlib.util.spec_from_file_location("reproduce_tables", ROOT / "tools" / "reproduce_tables.py")
+    mod = importlib.util.module_from_spec(spec)
+    monkeypatch.setitem(sys.modules, spec.name, mod)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_evaluate_reuses_until_the_policy_changes(repo: Path, monkeypatch, capsys):
+    """The tool's `evaluate` on a fake layout (the evaluation command stubbed: nothing runs)."""
+    tool = _tool(monkeypatch)
+    runs: list[list[str]] = []
+
+    def fake_sh(cmd: list[str], log: Path) -> None:
+        runs.append(cmd)
+        out = Path(next(a for a in cmd if a.startswith("out="))[4:])
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "metrics.json").write_text("{}")
+
+    monkeypatch.setattr(tool, "sh", fake_sh)
+    monkeypatch.setattr(tool, "CONTROLLER_MODELS", frozenset({"balance"}))
+    (repo / "models" / "balance" / "config.yaml").write_text(
+        f"controller:\n  name: balance\n  policy: {repo / 'models' / 'policy_a'}\n")
+    lay = tool.Layout(repo / "results", repo / "models", repo / "runs", repo / "datasets", repo / "data")
+    e = Evaluation("balance", "armar4", "target_point")
+    raw = repo / "results" / "raw" / e.id
+
+    def run() -> None:
+        tool.evaluate(e, tool.PROFILES["quick"], lay, True, repo / "results" / "logs")
+
+    raw.mkdir(parents=True)
+    (raw / "metrics.json").write_text("{}")
+    run()  # a result without inputs.json: kept, nothing recorded
+    assert runs == [] and not (raw / "inputs.json").exists()
+    (raw / "metrics.json").unlink()
+    run()  # no result: evaluated, inputs recorded
+    assert len(runs) == 1 and (raw / "inputs.json").is_file()
+    run()  # unchanged: kept
+    assert len(runs) == 1
+    (repo / "models" / "balance" / "config.yaml").write_text(
+        f"controller:\n  name: balance\n  policy: {repo / 'models' / 'policy_b'}\n")
+    run()  # the controller names another policy: re-evaluated, and said so
+    assert len(runs) == 2
+    assert "inputs changed" in capsys.readouterr().out
+    run()
+    assert len(runs) == 2
+
+
+def test_path_change_re_evaluates_new_weights(repo: Path, monkeypatch):
+    tool = _tool(monkeypatch)
+    runs: list[list[str]] = []
+
+    def fake_sh(cmd: list[str], log: Path) -> None:
+        runs.append(cmd)
+        Path(cmd[5]).parent.mkdir(parents=True, exist_ok=True)
+        Path(cmd[5]).write_text("{}")
+
+    monkeypatch.setattr(tool, "sh", fake_sh)
+    lay = tool.Layout(repo / "results", repo / "models", repo / "runs", repo / "datasets", repo / "data")
+
+    def run() -> None:
+        tool.path_change("armar4/target_point", "policy_a", "armar4/target_point", tool.PROFILES["quick"], lay, True,
+                         repo / "results" / "logs")
+
+    run()
+    run()
+    assert len(runs) == 1 and (repo / "results" / "raw" / "path_change_armar4_target_point.inputs.json").is_file()
+    (repo / "models" / "policy_a" / "model.pt").write_bytes(b"retrained a")
+    run()
+    assert len(runs) == 2
+
+
+def test_trueadapt_evaluation_records_its_inputs(tmp_path: Path, monkeypatch):
+    """A TrueAdapt evaluation (the reference, no model) on the committed split: recorded, then kept."""
+    tool = _tool(monkeypatch)
+    runs: list[list[str]] = []
+
+    def fake_run(cmd: list[str] | None, log: Path) -> None:
+        if cmd is not None:
+            runs.append(cmd)
+            out = Path(cmd[cmd.index("--out") + 1])
+            out.mkdir(parents=True, exist_ok=True)
+            (out / "metrics.json").write_text("{}")
+
+    monkeypatch.setattr(tool, "run_script", fake_run)
+    lay = tool.Layout(tmp_path, tmp_path / "models", tmp_path / "runs", tmp_path / "datasets", tmp_path / "data")
+    a = tool.adapt.AdaptEval("on_plate")
+    for _ in range(2):
+        tool.adapt_evaluate(a, tool.PROFILES["quick"], lay, True, tmp_path / "logs")
+    files = json.loads((tmp_path / "raw" / a.id / "inputs.json").read_text())["files"]
+    assert len(runs) == 1 and sorted(files) == ["datasets/iiwa7/trueadapt_on_plate/dataset.json",
+                                                "datasets/iiwa7/trueadapt_on_plate/test.npz"]
