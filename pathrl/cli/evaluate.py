@@ -1,88 +1,152 @@
 """``pathrl-eval``: evaluate a training run or a shipped model directory.
 
     pathrl-eval run_dir=models/iiwa7_random [dataset=NAME | dataset.path=DIR] [split=test]
-                [episodes=N] [segments=paper|full] [seed=0] [out=DIR]
+                [episodes=N] [segments=paper|full] [seed=0] [out=DIR] [record=true|false] [num_envs=1200]
                 [task=ball_on_plate|standing] [backend=pybullet|analytic] [compile_limits=true|false]
                 [open_loop=true|false] [checkpoint=model_K.pt] [dataset.out_of_limits=refuse|clip]
 
-``task`` adds a feedback task to a run trained without one (its sensor values stay unobserved); runs with
-a task are simulated with ``backend`` (default PyBullet). ``open_loop=true`` freezes the task's sensor at
-its first value of each episode. ``checkpoint`` evaluates that checkpoint of a training run instead of
-its latest. ``run_dir`` may also be a model-based controller's directory
-(``models/iiwa7_ball_tray_controller``).
+The arguments are Hydra overrides of ``conf/eval_app.yaml`` (schema :class:`pathrl.config.schema.EvalAppCfg`).
+``dataset=NAME`` is ``data/<the run's robot>/NAME`` (short for ``dataset.name=NAME``); neither ``dataset`` nor
+``dataset.path``: the run's own dataset. ``task`` (group ``conf/task``; only its name is used) adds a feedback
+task to a run trained without one (its sensor values stay unobserved); runs with a task are simulated with
+``backend`` (default PyBullet). ``open_loop=true`` freezes the task's sensor at its first value of each episode.
+``checkpoint`` evaluates that checkpoint of a training run instead of its latest. ``run_dir`` may also be a
+model-based controller's directory (``models/iiwa7_ball_tray_controller``).
 """
 
 from __future__ import annotations
 
+import dataclasses
+import re
+import typing
+from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
-from pathrl.cli.common import UserError, parse_key_values, run_cli
+from pathrl.cli.common import UserError, compose, run_cli, to_container
 
 __all__ = ["OFFSET_WARN_RAD", "main"]
 
-USAGE = ("usage: pathrl-eval run_dir=RUN [dataset=NAME | dataset.path=DIR] [split=test] [episodes=N] "
-         "[segments=paper|full] [seed=S] [out=DIR] [record=true|false] [task=ball_on_plate|standing] "
-         "[backend=pybullet|analytic] [compile_limits=true|false] [open_loop=true|false] [checkpoint=model_K.pt] "
-         "[dataset.out_of_limits=refuse|clip]")
-KEYS = {"run_dir", "dataset", "dataset.path", "split", "episodes", "segments", "seed", "out", "record", "num_envs",
-        "task", "backend", "compile_limits", "open_loop", "checkpoint", "dataset.out_of_limits"}
+USAGE = "usage: " + " ".join(__doc__.split("\n\n")[1].split())
 
 
-def _int(args: dict[str, str], key: str, default: int | None) -> int | None:
-    if key not in args:
-        return default
+def _keys(schema: type, prefix: str = "") -> list[str]:
+    """The dotted keys of a dataclass schema, recursing into dataclass fields (``dataset``, ``dataset.path``)."""
+    out = []
+    for f in dataclasses.fields(schema):
+        out.append(prefix + f.name)
+        sub = typing.get_type_hints(schema)[f.name]
+        if dataclasses.is_dataclass(sub):
+            out += _keys(sub, f"{prefix}{f.name}.")
+    return out
+
+
+def _overrides(argv: Sequence[str], keys: Sequence[str]) -> list[str]:
+    """`argv` as Hydra overrides of ``eval_app``: ``dataset=NAME`` becomes ``dataset.name=NAME`` (``dataset`` is a
+    config group of the other CLIs); a word without ``=`` or a key outside `keys` is a UserError."""
+    out = []
+    for a in argv:
+        if "=" not in a:
+            raise UserError(f"expected key=value, got {a!r}; {USAGE}")
+        key, value = a.split("=", 1)
+        if key.lstrip("+~") not in keys:
+            raise UserError(f"unknown argument {key!r}; known: {', '.join(sorted(keys))}")
+        if key == "task" and value not in (*_path_tasks(), "null"):  # before Hydra: its message lists every task
+            raise UserError(f"task must be one of {', '.join(_path_tasks())}, got {value!r}")
+        key = "dataset.name" if key == "dataset" else key
+        out.append(f"{key}={_quoted(value)}" if key in _LITERAL and value != "null" else f"{key}={value}")
+    return out
+
+
+#: Keys whose value is taken as written (a path or a name), as before Hydra: ``out=/tmp/a,b`` is not a list.
+_LITERAL = ("run_dir", "dataset.name", "dataset.path", "split", "out", "checkpoint")
+
+
+def _quoted(value: str) -> str:
+    """`value` as a Hydra quoted string (commas, brackets, ``<>`` and spaces kept; Hydra unescapes only the
+    backslashes before a quote or the closing quote)."""
+    q = "'" if "'" not in value else '"'
+    body = re.sub(rf"(\\*)({q}|$)", lambda m: m.group(1) * 2 + ("\\" + m.group(2) if m.group(2) else ""), value)
+    return q + body + q
+
+
+def _reword(message: str) -> str:
+    """Hydra's type errors of an override as ``KEY must be ...``; other messages unchanged."""
+    m = re.search(r"override ([\w.]+)=(.*?) Value .*(could not be converted to Integer|is not a valid bool)", message)
+    if m is None:
+        return message
+    kind = "an integer" if "Integer" in m.group(3) else "true or false"
+    return f"{m.group(1)} must be {kind}, got {m.group(2)!r}"
+
+
+def _print_help() -> None:
+    """The usage, the config group (``task``) and every key with its default (``conf/eval_app.yaml``)."""
+    from omegaconf import OmegaConf
+
+    from pathrl.config.schema import EvalAppCfg
+
+    print(__doc__.strip())
+    print("\n== Configuration groups ==\nCompose your configuration from those groups (group=option)\n")
+    print(f"task: {', '.join(_path_tasks())}\n")
+    print("== Config ==\nOverride anything in the config (foo.bar=value)\n")
+    print(OmegaConf.to_yaml(compose("eval_app", [], EvalAppCfg)).rstrip())
+
+
+def _path_tasks() -> list[str]:
+    """The tasks an evaluation can add to a run (those without a TrueAdapt setting)."""
+    from pathrl.envs.registry import TASKS
+
+    return [name for name, t in TASKS.items() if not t.adapt]
+
+
+def _config(argv: list[str]) -> dict[str, Any]:
+    """The composed ``eval_app`` config of `argv`, checked (UserError: one line)."""
+    from pathrl.config.schema import EvalAppCfg
+
+    keys = _keys(EvalAppCfg)
     try:
-        return int(args[key])
-    except ValueError:
-        raise UserError(f"{key} must be an integer, got {args[key]!r}") from None
-
-
-def _bool(args: dict[str, str], key: str, default: bool) -> bool:
-    value = args.get(key, str(default)).lower()
-    if value not in ("true", "false"):
-        raise UserError(f"{key} must be true or false, got {args[key]!r}")
-    return value == "true"
+        cfg = to_container(compose("eval_app", _overrides(argv, keys), EvalAppCfg))
+    except UserError as exc:
+        raise UserError(_reword(str(exc))) from None
+    if cfg["run_dir"] == "???":
+        raise UserError(f"run_dir is required; {USAGE}")
+    checks = [
+        ("segments", cfg["segments"], ("paper", "full")),
+        ("dataset.out_of_limits", cfg["dataset"]["out_of_limits"], ("refuse", "clip")),
+        ("backend", cfg["backend"], ("pybullet", "analytic")),
+    ]
+    for key, value, allowed in checks:
+        if value not in allowed:
+            raise UserError(f"{key} must be {' or '.join(allowed)}, got {value!r}")
+    if cfg["episodes"] is not None and cfg["episodes"] < 1:
+        raise UserError(f"episodes must be >= 1, got {cfg['episodes']}")
+    if cfg["num_envs"] < 1:
+        raise UserError(f"num_envs must be >= 1, got {cfg['num_envs']}")
+    return {**cfg, "task": None if cfg["task"] is None else cfg["task"]["name"]}
 
 
 def _main(argv: list[str]) -> None:
     from pathrl.dataset.io import DatasetError
-    from pathrl.envs.registry import TASKS
     from pathrl.eval.evaluate import RunError, evaluate, load_run
 
-    args = parse_key_values(argv, KEYS, USAGE, required=("run_dir",))
-    segments = args.get("segments", "paper")
-    if segments not in ("paper", "full"):
-        raise UserError(f"segments must be paper or full, got {segments!r}")
-    path_tasks = [name for name, t in TASKS.items() if not t.adapt]  # tasks an evaluation can add to a run
-    if args.get("task", "tracking") not in path_tasks:
-        raise UserError(f"task must be one of {', '.join(path_tasks)}, got {args['task']!r}")
-    if args.get("dataset.out_of_limits", "refuse") not in ("refuse", "clip"):
-        raise UserError(f"dataset.out_of_limits must be refuse or clip, got {args['dataset.out_of_limits']!r}")
-    if args.get("backend", "pybullet") not in ("pybullet", "analytic"):
-        raise UserError(f"backend must be pybullet or analytic, got {args['backend']!r}")
-    flags = {"record": _bool(args, "record", True), "compile_limits": _bool(args, "compile_limits", False),
-             "open_loop": _bool(args, "open_loop", False)}
-    episodes = _int(args, "episodes", None)
-    if episodes is not None and episodes < 1:
-        raise UserError(f"episodes must be >= 1, got {episodes}")
-    num_envs = _int(args, "num_envs", 1200)
-    if num_envs is None or num_envs < 1:
-        raise UserError(f"num_envs must be >= 1, got {args.get('num_envs')}")
-    run_dir = Path(args["run_dir"])
-    dataset_path = args.get("dataset.path")
-    if "dataset" in args:
+    if any(a in ("-h", "--help") for a in argv):
+        _print_help()
+        return
+    cfg = _config(argv)
+    run_dir = Path(cfg["run_dir"])
+    dataset_path = cfg["dataset"]["path"]
+    if cfg["dataset"]["name"] is not None:
         try:
-            cfg, _, _ = load_run(run_dir)
+            run_cfg, _, _ = load_run(run_dir)
         except RunError as exc:
             raise UserError(str(exc)) from None
-        dataset_path = str(Path("data") / cfg["robot"]["name"] / args["dataset"])
+        dataset_path = str(Path("data") / run_cfg["robot"]["name"] / cfg["dataset"]["name"])
     try:
-        m = evaluate(run_dir, dataset_path, args.get("split", "test"), episodes, segments,
-                     _int(args, "seed", 0) or 0, Path(args["out"]) if "out" in args else None,
-                     num_envs=num_envs,
-                     record=flags["record"], task=args.get("task"), backend=args.get("backend", "pybullet"),
-                     compile_limits=flags["compile_limits"], open_loop=flags["open_loop"],
-                     checkpoint=args.get("checkpoint"), out_of_limits=args.get("dataset.out_of_limits", "refuse"))
+        m = evaluate(run_dir, dataset_path, cfg["split"], cfg["episodes"], cfg["segments"], cfg["seed"],
+                     Path(cfg["out"]) if cfg["out"] is not None else None, num_envs=cfg["num_envs"],
+                     record=cfg["record"], task=cfg["task"], backend=cfg["backend"],
+                     compile_limits=cfg["compile_limits"], open_loop=cfg["open_loop"],
+                     checkpoint=cfg["checkpoint"], out_of_limits=cfg["dataset"]["out_of_limits"])
     except (RunError, DatasetError) as exc:
         raise UserError(str(exc)) from None
     _print_table(m)

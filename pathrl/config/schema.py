@@ -16,8 +16,8 @@ from pathrl.envs.path_change_cfg import PathChangeCfg
 from pathrl.envs.tracking_cfg import EnvSettings
 
 __all__ = [
-    "CriticWarmupCfg", "DatasetAppCfg", "DatasetCfg", "KnotsCfg", "RewardCfg", "RobotCfg", "StdAnnealCfg", "TaskCfg",
-    "TcpCfg", "ToppraAppCfg", "TrainAppCfg", "WorkspaceCfg",
+    "CriticWarmupCfg", "DatasetAppCfg", "DatasetCfg", "EvalAppCfg", "EvalDatasetCfg", "KnotsCfg", "RewardCfg",
+    "RobotCfg", "StdAnnealCfg", "TaskCfg", "TcpCfg", "ToppraAppCfg", "TrainAppCfg", "WorkspaceCfg",
 ]
 
 
@@ -110,6 +110,35 @@ class ToppraAppCfg:
     workers: int = 1
     out: str | None = None
     ruckig: bool = False  # also track each plan with Ruckig under the jerk limits (pathrl.baselines.ruckig_track)
+
+
+@dataclass
+class EvalDatasetCfg:
+    """``pathrl-eval``'s dataset: by ``name`` (``data/<the run's robot>/<name>``) or ``path``; neither: the run's."""
+
+    name: str | None = None
+    path: str | None = None
+    out_of_limits: str = "refuse"  # refuse | clip (pathrl.dataset.io)
+
+
+@dataclass
+class EvalAppCfg:
+    """``pathrl-eval``."""
+
+    run_dir: str = MISSING  # a training run or a model directory
+    dataset: EvalDatasetCfg = field(default_factory=EvalDatasetCfg)
+    split: str = "test"
+    episodes: int | None = None  # default: paths of the split (full) or 1200 (paper)
+    segments: str = "paper"  # paper | full
+    seed: int = 0
+    out: str | None = None  # directory of metrics.json / episodes.mcap; default: run_dir
+    record: bool = True
+    num_envs: int = 1200
+    task: TaskCfg | None = None  # group conf/task: a feedback task added to a run trained without one (its name)
+    backend: str = "pybullet"  # pybullet | analytic (runs with a task)
+    compile_limits: bool = False
+    open_loop: bool = False  # freeze the task's sensor at its first value of each episode
+    checkpoint: str | None = None  # model_K.pt of a training run; default: its latest
 
 
 @dataclass
