@@ -15,6 +15,7 @@ from test_storage import _flip_tensor_bytes
 from test_train import ROOT, run, train_cmd
 
 from pathrl.cli import evaluate as eval_cli
+from pathrl.cli import export as export_cli
 from pathrl.cli import toppra as toppra_cli
 from pathrl.dataset.io import save_dataset
 from pathrl.dataset.synthetic import smooth_paths
@@ -159,9 +160,28 @@ def test_eval_damaged_model(case, tmp_path, capsys):
     (["run_dir=models/iiwa7_random", "segments=some"], "segments must be"),
     (["run_dir=models/iiwa7_random", "dataset.out_of_limits=ignore", "episodes=1"], "must be refuse or clip"),
     (["run_dir=models/iiwa7_random", "bogus=1"], "unknown argument"),
+    (["run_dir=models/iiwa7_random", "~num_envs=1200"], "unknown argument '~num_envs'"),
+    (["run_dir=models/iiwa7_random", "+seed=1"], "unknown argument '+seed'"),
 ])
 def test_eval_bad_arguments(argv, msg, tmp_path, capsys):
     assert eval_cli.main([*argv, f"out={tmp_path / 'out'}"]) == 2
+    assert msg in _one_line(capsys.readouterr().err)
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("argv, msg", [
+    (["run_dir=models/iiwa7_random", "observations=0"], "observations must be >= 1"),
+    (["run_dir=models/iiwa7_random", "observations=abc"], "observations must be an integer, got 'abc'"),
+    (["run_dir=models/nope"], "not found"),
+    (["run_dir=models/iiwa7_ball_tray_controller"], "no network to export"),
+    (["run_dir=models/iiwa7_random", "bogus=1"], "unknown argument 'bogus'"),
+    (["run_dir=models/iiwa7_random", "dataset=random"], "unknown argument 'dataset'"),
+    (["run_dir=models/iiwa7_random", "dataset.path=/nonexistent"], "dataset directory not found"),
+    (["models/iiwa7_random"], "expected key=value"),
+    ([], "run_dir is required"),
+])
+def test_export_bad_arguments(argv, msg, tmp_path, capsys):
+    assert export_cli.main([*argv, f"out={tmp_path / 'out'}"]) == 2
     assert msg in _one_line(capsys.readouterr().err)
     assert not (tmp_path / "out").exists()
 

@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import dataclasses
+import re
 import sys
+import typing
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -10,7 +13,10 @@ from omegaconf import DictConfig, OmegaConf
 
 from pathrl.config.paths import CONF_DIR
 
-__all__ = ["CONF_DIR", "UserError", "compose", "hydra_message", "parse_key_values", "run_cli", "to_container"]
+__all__ = [
+    "CONF_DIR", "UserError", "compose", "hydra_message", "key_value_overrides", "quoted", "reword_type_error",
+    "run_cli", "schema_keys", "to_container",
+]
 
 
 class UserError(Exception):
@@ -67,24 +73,51 @@ def run_cli(main: Callable[[list[str]], Any], argv: Sequence[str] | None = None)
     return 0
 
 
-def parse_key_values(argv: Sequence[str], keys: set[str], usage: str, required: Sequence[str] = ()) -> dict[str, str]:
-    """``key=value`` arguments of a CLI that takes a fixed set of `keys` (``-h`` prints `usage`); UserError on an
-    unknown key, a word without ``=`` or a missing required key."""
-    args: dict[str, str] = {}
+def key_value_overrides(argv: Sequence[str], keys: Sequence[str], usage: str,
+                        literal: Sequence[str] = ()) -> list[str]:
+    """``key=value`` arguments as Hydra overrides; the values of `literal` keys (paths, names) are quoted so they are
+    taken as written (``out=/tmp/a,b`` is not a list). UserError on a word without ``=`` or a key outside `keys`
+    (``+key`` and ``~key`` included)."""
+    out = []
     for a in argv:
-        if a in ("-h", "--help"):
-            print(usage)
-            raise SystemExit(0)
         if "=" not in a:
             raise UserError(f"expected key=value, got {a!r}; {usage}")
-        k, v = a.split("=", 1)
-        if k not in keys:
-            raise UserError(f"unknown argument {k!r}; known: {', '.join(sorted(keys))}")
-        args[k] = v
-    for k in required:
-        if k not in args:
-            raise UserError(f"{k} is required; {usage}")
-    return args
+        key, value = a.split("=", 1)
+        if key not in keys:  # no +key / ~key: the app's keys are fixed
+            raise UserError(f"unknown argument {key!r}; known: {', '.join(sorted(keys))}")
+        out.append(f"{key}={quoted(value)}" if key in literal and value != "null" else a)
+    return out
+
+
+def quoted(value: str) -> str:
+    """`value` as a Hydra quoted string (commas, brackets, ``<>`` and spaces kept; Hydra unescapes only the
+    backslashes before a quote or the closing quote)."""
+    q = "'" if "'" not in value else '"'
+    body = re.sub(rf"(\\*)({q}|$)", lambda m: m.group(1) * 2 + ("\\" + m.group(2) if m.group(2) else ""), value)
+    return q + body + q
+
+
+def reword_type_error(message: str) -> str:
+    """Hydra's type errors of an override as ``KEY must be ...``; other messages unchanged."""
+    m = re.search(r"override ([\w.]+)=(.*?) Value .*(could not be converted to Integer|is not a valid bool)", message)
+    if m is None:
+        return message
+    kind = "an integer" if "Integer" in m.group(3) else "true or false"
+    return f"{m.group(1)} must be {kind}, got {m.group(2)!r}"
+
+
+def schema_keys(schema: type, prefix: str = "", leaves: bool = False) -> list[str]:
+    """The dotted keys of a dataclass schema, recursing into dataclass fields (``dataset``, ``dataset.path``);
+    `leaves`: only the keys of values (``dataset.path``, not ``dataset``)."""
+    out = []
+    hints = typing.get_type_hints(schema)
+    for f in dataclasses.fields(schema):
+        nested = dataclasses.is_dataclass(hints[f.name])
+        if not (leaves and nested):
+            out.append(prefix + f.name)
+        if nested:
+            out += schema_keys(hints[f.name], f"{prefix}{f.name}.", leaves)
+    return out
 
 
 def to_container(cfg: DictConfig) -> dict[str, Any]:

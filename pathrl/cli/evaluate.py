@@ -16,29 +16,15 @@ model-based controller's directory (``models/iiwa7_ball_tray_controller``).
 
 from __future__ import annotations
 
-import dataclasses
-import re
-import typing
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from pathrl.cli.common import UserError, compose, run_cli, to_container
+from pathrl.cli.common import UserError, compose, quoted, reword_type_error, run_cli, schema_keys, to_container
 
 __all__ = ["OFFSET_WARN_RAD", "main"]
 
 USAGE = "usage: " + " ".join(__doc__.split("\n\n")[1].split())
-
-
-def _keys(schema: type, prefix: str = "") -> list[str]:
-    """The dotted keys of a dataclass schema, recursing into dataclass fields (``dataset``, ``dataset.path``)."""
-    out = []
-    for f in dataclasses.fields(schema):
-        out.append(prefix + f.name)
-        sub = typing.get_type_hints(schema)[f.name]
-        if dataclasses.is_dataclass(sub):
-            out += _keys(sub, f"{prefix}{f.name}.")
-    return out
 
 
 def _overrides(argv: Sequence[str], keys: Sequence[str]) -> list[str]:
@@ -49,34 +35,17 @@ def _overrides(argv: Sequence[str], keys: Sequence[str]) -> list[str]:
         if "=" not in a:
             raise UserError(f"expected key=value, got {a!r}; {USAGE}")
         key, value = a.split("=", 1)
-        if key.lstrip("+~") not in keys:
+        if key not in keys:  # no +key / ~key: the app's keys are fixed (as pathrl-export)
             raise UserError(f"unknown argument {key!r}; known: {', '.join(sorted(keys))}")
         if key == "task" and value not in (*_path_tasks(), "null"):  # before Hydra: its message lists every task
             raise UserError(f"task must be one of {', '.join(_path_tasks())}, got {value!r}")
         key = "dataset.name" if key == "dataset" else key
-        out.append(f"{key}={_quoted(value)}" if key in _LITERAL and value != "null" else f"{key}={value}")
+        out.append(f"{key}={quoted(value)}" if key in _LITERAL and value != "null" else f"{key}={value}")
     return out
 
 
 #: Keys whose value is taken as written (a path or a name), as before Hydra: ``out=/tmp/a,b`` is not a list.
 _LITERAL = ("run_dir", "dataset.name", "dataset.path", "split", "out", "checkpoint")
-
-
-def _quoted(value: str) -> str:
-    """`value` as a Hydra quoted string (commas, brackets, ``<>`` and spaces kept; Hydra unescapes only the
-    backslashes before a quote or the closing quote)."""
-    q = "'" if "'" not in value else '"'
-    body = re.sub(rf"(\\*)({q}|$)", lambda m: m.group(1) * 2 + ("\\" + m.group(2) if m.group(2) else ""), value)
-    return q + body + q
-
-
-def _reword(message: str) -> str:
-    """Hydra's type errors of an override as ``KEY must be ...``; other messages unchanged."""
-    m = re.search(r"override ([\w.]+)=(.*?) Value .*(could not be converted to Integer|is not a valid bool)", message)
-    if m is None:
-        return message
-    kind = "an integer" if "Integer" in m.group(3) else "true or false"
-    return f"{m.group(1)} must be {kind}, got {m.group(2)!r}"
 
 
 def _print_help() -> None:
@@ -103,11 +72,11 @@ def _config(argv: list[str]) -> dict[str, Any]:
     """The composed ``eval_app`` config of `argv`, checked (UserError: one line)."""
     from pathrl.config.schema import EvalAppCfg
 
-    keys = _keys(EvalAppCfg)
+    keys = schema_keys(EvalAppCfg)
     try:
         cfg = to_container(compose("eval_app", _overrides(argv, keys), EvalAppCfg))
     except UserError as exc:
-        raise UserError(_reword(str(exc))) from None
+        raise UserError(reword_type_error(str(exc))) from None
     if cfg["run_dir"] == "???":
         raise UserError(f"run_dir is required; {USAGE}")
     checks = [

@@ -5,19 +5,58 @@
 Writes ``actor.pt``, ``actor.onnx`` and ``export.json`` to ``out`` (default ``<run_dir>/export``) and checks both
 exports against the PyTorch actor on `observations` states the policy visits on the test split (paper
 segments); ``dataset.path`` defaults to the run's dataset, else the committed ``datasets/<robot>/<dataset>``.
+The arguments are Hydra overrides of ``conf/export_app.yaml`` (schema :class:`pathrl.config.schema.ExportAppCfg`).
 """
 
 from __future__ import annotations
 
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
-from pathrl.cli.common import UserError, parse_key_values, run_cli
+from pathrl.cli.common import (
+    UserError,
+    compose,
+    key_value_overrides,
+    reword_type_error,
+    run_cli,
+    schema_keys,
+    to_container,
+)
 
 __all__ = ["main"]
 
 USAGE = "usage: pathrl-export run_dir=RUN [out=DIR] [dataset.path=DIR] [observations=N]"
-KEYS = {"run_dir", "out", "dataset.path", "observations"}
+
+#: Keys whose value is taken as written (a path), as before Hydra: ``out=/tmp/a,b`` is not a list.
+_LITERAL = ("run_dir", "out", "dataset.path")
+
+
+def _print_help() -> None:
+    """The usage and every key with its default (``conf/export_app.yaml``)."""
+    from omegaconf import OmegaConf
+
+    from pathrl.config.schema import ExportAppCfg
+
+    print(__doc__.strip())
+    print("\n== Config ==\nOverride anything in the config (foo.bar=value)\n")
+    print(OmegaConf.to_yaml(compose("export_app", [], ExportAppCfg)).rstrip())
+
+
+def _config(argv: list[str]) -> dict[str, Any]:
+    """The composed ``export_app`` config of `argv`, checked (UserError: one line)."""
+    from pathrl.config.schema import ExportAppCfg
+
+    overrides = key_value_overrides(argv, schema_keys(ExportAppCfg, leaves=True), USAGE, _LITERAL)
+    try:
+        cfg = to_container(compose("export_app", overrides, ExportAppCfg))
+    except UserError as exc:
+        raise UserError(reword_type_error(str(exc))) from None
+    if cfg["run_dir"] == "???":
+        raise UserError(f"run_dir is required; {USAGE}")
+    if cfg["observations"] < 1:
+        raise UserError(f"observations must be >= 1, got {cfg['observations']}")
+    return cfg
 
 
 def _main(argv: list[str]) -> None:
@@ -29,14 +68,12 @@ def _main(argv: list[str]) -> None:
     from pathrl.paths.knots import KnotStrategy
     from pathrl.robot.model import load_robot
 
-    args = parse_key_values(argv, KEYS, USAGE, required=("run_dir",))
+    if any(a in ("-h", "--help") for a in argv):
+        _print_help()
+        return
+    args = _config(argv)
     run_dir = Path(args["run_dir"])
-    try:
-        count = int(args.get("observations", "1000"))
-    except ValueError:
-        raise UserError(f"observations must be an integer, got {args['observations']!r}") from None
-    if count < 1:
-        raise UserError(f"observations must be >= 1, got {count}")
+    count = args["observations"]
     try:
         cfg, ckpt, summary = load_run(run_dir)
     except RunError as exc:
@@ -51,8 +88,8 @@ def _main(argv: list[str]) -> None:
         raise UserError(f"{run_dir}: exporting policies of feedback tasks ({feedback}) is not "
                         "supported (their state needs the task's sensor)")
     robot = load_robot(cfg["robot"])
-    ds = args.get("dataset.path") or cfg["dataset"]["path"]
-    if "dataset.path" not in args and not Path(ds).is_dir():
+    ds = args["dataset"]["path"] or cfg["dataset"]["path"]
+    if args["dataset"]["path"] is None and not Path(ds).is_dir():
         ds = str(Path("datasets") / robot.name / cfg["dataset"]["name"])
     try:
         paths = load_pathset(ds, "test", KnotStrategy.from_cfg(cfg["knots"]), robot=robot)
@@ -61,7 +98,7 @@ def _main(argv: list[str]) -> None:
     env_cfg = replace(TrackingEnvCfg.from_run(cfg, num_envs=min(8, paths.num_paths), seed=0,
                                              knot_gap_norm=summary.get("knot_gap_norm")),
                       **EVAL_ENV)
-    out = Path(args.get("out") or run_dir / "export")
+    out = Path(args["out"] or run_dir / "export")
     try:
         report = export_policy(cfg, ckpt, paths, env_cfg, robot, out, count)
     except ValueError as exc:
@@ -75,3 +112,7 @@ def _main(argv: list[str]) -> None:
 def main(argv: list[str] | None = None) -> int:
     """Entry point of ``pathrl-export key=value ...`` (argv: sys.argv[1:]); returns the exit code."""
     return run_cli(_main, argv)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

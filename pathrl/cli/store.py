@@ -39,6 +39,7 @@ def register() -> None:
     cs = ConfigStore.instance()
     cs.store(name="dataset_app_schema", node=schema.DatasetAppCfg)
     cs.store(name="eval_app_schema", node=schema.EvalAppCfg)
+    cs.store(name="export_app_schema", node=schema.ExportAppCfg)
     cs.store(name="toppra_app_schema", node=schema.ToppraAppCfg)
     cs.store(name="train_app_schema", node=_train_app_node())
     cs.store(group="robot", name="robot_schema", node=schema.RobotCfg)

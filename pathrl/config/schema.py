@@ -16,8 +16,9 @@ from pathrl.envs.path_change_cfg import PathChangeCfg
 from pathrl.envs.tracking_cfg import EnvSettings
 
 __all__ = [
-    "CriticWarmupCfg", "DatasetAppCfg", "DatasetCfg", "EvalAppCfg", "EvalDatasetCfg", "KnotsCfg", "RewardCfg",
-    "RobotCfg", "StdAnnealCfg", "TaskCfg", "TcpCfg", "ToppraAppCfg", "TrainAppCfg", "WorkspaceCfg",
+    "CriticWarmupCfg", "DatasetAppCfg", "DatasetCfg", "EvalAppCfg", "EvalDatasetCfg", "ExportAppCfg",
+    "ExportDatasetCfg", "KnotsCfg", "RewardCfg", "RobotCfg", "StdAnnealCfg", "TaskCfg", "TcpCfg", "ToppraAppCfg",
+    "TrainAppCfg", "WorkspaceCfg",
 ]
 
 
@@ -139,6 +140,23 @@ class EvalAppCfg:
     compile_limits: bool = False
     open_loop: bool = False  # freeze the task's sensor at its first value of each episode
     checkpoint: str | None = None  # model_K.pt of a training run; default: its latest
+
+
+@dataclass
+class ExportDatasetCfg:
+    """``pathrl-export``'s dataset: its test split's states check the exports."""
+
+    path: str | None = None  # default: the run's dataset, else the committed datasets/<robot>/<its name>
+
+
+@dataclass
+class ExportAppCfg:
+    """``pathrl-export``."""
+
+    run_dir: str = MISSING  # a training run or a model directory
+    out: str | None = None  # directory of actor.pt, actor.onnx, export.json; default: <run_dir>/export
+    dataset: ExportDatasetCfg = field(default_factory=ExportDatasetCfg)
+    observations: int = 1000  # recorded states the exports are checked on
 
 
 @dataclass
