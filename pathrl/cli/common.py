@@ -14,8 +14,8 @@ from omegaconf import DictConfig, OmegaConf
 from pathrl.config.paths import CONF_DIR
 
 __all__ = [
-    "CONF_DIR", "UserError", "compose", "hydra_message", "key_value_overrides", "quoted", "reword_type_error",
-    "run_cli", "schema_keys", "to_container",
+    "CONF_DIR", "UserError", "compose", "hydra_message", "key_value_app", "key_value_overrides", "quoted",
+    "reword_type_error", "run_cli", "schema_keys", "to_container",
 ]
 
 
@@ -87,6 +87,22 @@ def key_value_overrides(argv: Sequence[str], keys: Sequence[str], usage: str,
             raise UserError(f"unknown argument {key!r}; known: {', '.join(sorted(keys))}")
         out.append(f"{key}={quoted(value)}" if key in literal and value != "null" else a)
     return out
+
+
+def key_value_app(config_name: str, schema: type, argv: Sequence[str], usage: str, literal: Sequence[str] = (),
+                  keys: Sequence[str] | None = None) -> dict[str, Any]:
+    """The composed config of a ``key=value`` CLI (``conf/<config_name>.yaml``, `schema`) as a dict: the arguments
+    as overrides (:func:`key_value_overrides`; `keys` default: the schema's leaves), Hydra's type errors reworded
+    (:func:`reword_type_error`), ``run_dir`` required. UserError: one line."""
+    keys = schema_keys(schema, leaves=True) if keys is None else keys
+    overrides = key_value_overrides(argv, keys, usage, literal)
+    try:
+        cfg = to_container(compose(config_name, overrides, schema))
+    except UserError as exc:
+        raise UserError(reword_type_error(str(exc))) from None
+    if cfg.get("run_dir") == "???":
+        raise UserError(f"run_dir is required; {usage}")
+    return cfg
 
 
 def quoted(value: str) -> str:

@@ -20,27 +20,22 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from pathrl.cli.common import UserError, compose, quoted, reword_type_error, run_cli, schema_keys, to_container
+from pathrl.cli.common import UserError, compose, key_value_app, run_cli, schema_keys
 
 __all__ = ["OFFSET_WARN_RAD", "main"]
 
 USAGE = "usage: " + " ".join(__doc__.split("\n\n")[1].split())
 
 
-def _overrides(argv: Sequence[str], keys: Sequence[str]) -> list[str]:
-    """`argv` as Hydra overrides of ``eval_app``: ``dataset=NAME`` becomes ``dataset.name=NAME`` (``dataset`` is a
-    config group of the other CLIs); a word without ``=`` or a key outside `keys` is a UserError."""
+def _arguments(argv: Sequence[str]) -> list[str]:
+    """`argv` with ``dataset=NAME`` as ``dataset.name=NAME`` (``dataset`` is a config group of the other CLIs); an
+    unknown ``task`` is a UserError before Hydra (whose message would not list the tasks)."""
     out = []
     for a in argv:
-        if "=" not in a:
-            raise UserError(f"expected key=value, got {a!r}; {USAGE}")
-        key, value = a.split("=", 1)
-        if key not in keys:  # no +key / ~key: the app's keys are fixed (as pathrl-export)
-            raise UserError(f"unknown argument {key!r}; known: {', '.join(sorted(keys))}")
-        if key == "task" and value not in (*_path_tasks(), "null"):  # before Hydra: its message lists every task
+        key, eq, value = a.partition("=")
+        if eq and key == "task" and value not in (*_path_tasks(), "null"):
             raise UserError(f"task must be one of {', '.join(_path_tasks())}, got {value!r}")
-        key = "dataset.name" if key == "dataset" else key
-        out.append(f"{key}={quoted(value)}" if key in _LITERAL and value != "null" else f"{key}={value}")
+        out.append(f"dataset.name={value}" if eq and key == "dataset" else a)
     return out
 
 
@@ -72,13 +67,7 @@ def _config(argv: list[str]) -> dict[str, Any]:
     """The composed ``eval_app`` config of `argv`, checked (UserError: one line)."""
     from pathrl.config.schema import EvalAppCfg
 
-    keys = schema_keys(EvalAppCfg)
-    try:
-        cfg = to_container(compose("eval_app", _overrides(argv, keys), EvalAppCfg))
-    except UserError as exc:
-        raise UserError(reword_type_error(str(exc))) from None
-    if cfg["run_dir"] == "???":
-        raise UserError(f"run_dir is required; {USAGE}")
+    cfg = key_value_app("eval_app", EvalAppCfg, _arguments(argv), USAGE, _LITERAL, keys=schema_keys(EvalAppCfg))
     checks = [
         ("segments", cfg["segments"], ("paper", "full")),
         ("dataset.out_of_limits", cfg["dataset"]["out_of_limits"], ("refuse", "clip")),

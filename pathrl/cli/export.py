@@ -14,15 +14,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-from pathrl.cli.common import (
-    UserError,
-    compose,
-    key_value_overrides,
-    reword_type_error,
-    run_cli,
-    schema_keys,
-    to_container,
-)
+from pathrl.cli.common import UserError, compose, key_value_app, run_cli
 
 __all__ = ["main"]
 
@@ -47,13 +39,7 @@ def _config(argv: list[str]) -> dict[str, Any]:
     """The composed ``export_app`` config of `argv`, checked (UserError: one line)."""
     from pathrl.config.schema import ExportAppCfg
 
-    overrides = key_value_overrides(argv, schema_keys(ExportAppCfg, leaves=True), USAGE, _LITERAL)
-    try:
-        cfg = to_container(compose("export_app", overrides, ExportAppCfg))
-    except UserError as exc:
-        raise UserError(reword_type_error(str(exc))) from None
-    if cfg["run_dir"] == "???":
-        raise UserError(f"run_dir is required; {USAGE}")
+    cfg = key_value_app("export_app", ExportAppCfg, argv, USAGE, _LITERAL)
     if cfg["observations"] < 1:
         raise UserError(f"observations must be >= 1, got {cfg['observations']}")
     return cfg
