@@ -31,8 +31,9 @@ from pathrl.limits.kernels import kernel
 if TYPE_CHECKING:
     from pathrl.envs.tracking import PathTrackingEnv
 
-__all__ = ["OBS_ORDER", "OBS_TERMS", "ObsTerm", "active_terms", "assemble", "feedback_size", "observation_layout",
-           "observe_state", "state_fields", "state_size", "tcp_observation", "tcp_size", "tracking_state"]
+__all__ = ["OBS_ORDER", "OBS_TERMS", "ObsTerm", "active_terms", "assemble", "column_slices", "feedback_size",
+           "observation_layout", "observe_state", "state_fields", "state_size", "tcp_observation", "tcp_size",
+           "tracking_state"]
 
 
 @kernel(static=True)
@@ -175,14 +176,20 @@ def observation_layout(terms: Sequence[ObsTerm], env: PathTrackingEnv,
                        fields: bool = False) -> list[tuple[str, int, int]]:
     """(name, start, stop) column slices of the observation, in order; they cover it exactly. With `fields` the
     state term is split into its fields (``state/pos``, ... :func:`state_fields`)."""
-    out, start = [], 0
+    sizes = []
     for t in terms:
         if fields and t.name == "state":
-            parts = [(f"state/{f}", k) for f, k in state_fields(env.robot.dof, len(env.path_index),
+            sizes += [(f"state/{f}", k) for f, k in state_fields(env.robot.dof, len(env.path_index),
                                                                  env.cfg.n_state, env.cfg.end_obs)]
         else:
-            parts = [(t.name, t.size(env))]
-        for name, k in parts:
-            out.append((name, start, start + k))
-            start += k
+            sizes.append((t.name, t.size(env)))
+    return column_slices(sizes)
+
+
+def column_slices(sizes: Sequence[tuple[str, int]]) -> list[tuple[str, int, int]]:
+    """(name, size) parts laid side by side -> (name, start, stop) column slices, in order."""
+    out, start = [], 0
+    for name, k in sizes:
+        out.append((name, start, start + k))
+        start += k
     return out

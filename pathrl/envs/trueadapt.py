@@ -41,6 +41,7 @@ from torch import Tensor
 from pathrl.dataset.trueadapt import TrajectoryBank
 from pathrl.envs import terminations as terms
 from pathrl.envs.feedback import PLATE_SIZE, AnalyticBall
+from pathrl.envs.observations import column_slices
 from pathrl.envs.terminations import TerminationReason
 from pathrl.envs.trueadapt_rewards import AdaptQuantities, AdaptReward
 from pathrl.limits.backend import LimitBackend, env_scoped
@@ -252,11 +253,7 @@ class TrueAdaptEnv(_VecEnvBase):
 
     def observation_layout(self) -> list[tuple[str, int, int]]:
         """(part, start, stop) column slices of the observation, in order; they cover it exactly."""
-        out, start = [], 0
-        for name, t in self._obs_parts():
-            out.append((name, start, start + int(t.shape[1])))
-            start = out[-1][2]
-        return out
+        return column_slices([(name, int(t.shape[1])) for name, t in self._obs_parts()])
 
     @property
     def num_obs(self) -> int:
