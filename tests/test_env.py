@@ -6,7 +6,7 @@ import torch
 from tensordict import TensorDict
 
 from pathrl.envs.reference import ReferencePath, ReferenceTrackingEnv
-from pathrl.envs.rewards import StepQuantities, build_reward_terms, path_length
+from pathrl.envs.rewards import StepQuantities, build_reward_terms, path_length, tcp_deviation
 from pathrl.envs.tracking import PathTrackingEnv, TrackingEnvCfg, tcp_observation
 from pathrl.limits.braking import braking_acceleration
 from pathrl.limits.feasible import JointLimits
@@ -243,3 +243,62 @@ def test_tcp_obs_appends_reference_tcp_and_its_error():
 def test_tcp_obs_box_is_validated():
     with pytest.raises(ValueError, match="tcp_obs_box"):
         make_env(num_envs=2, tcp_obs=True, tcp_obs_box=(1.0, -1.0, -1.0, 1.0, 0.0, 1.0))
+
+
+def test_tcp_deviation_term_by_hand():
+    z = torch.zeros(3, dtype=torch.float64)
+    q = StepQuantities(z, z, z, z, z, z, close_to_end=z.bool(),
+                       task={"tcp_dev": torch.tensor([0.0, 0.05, 0.3], dtype=torch.float64)})
+    # (1 - min(1, d / 0.1))^2: 1, 0.25, 0
+    np.testing.assert_allclose(tcp_deviation(q, threshold=0.1).numpy(), [1.0, 0.25, 0.0], atol=1e-12)
+
+
+def test_tcp_deviation_reward_uses_the_hands_distance_at_the_step_end():
+    reward = {**REWARD, "tcp_deviation": {"weight": 1.0, "threshold": 0.1}}
+    robot = load_robot_by_name("armar4")
+    knots = smooth_paths(robot)
+    paths = build_pathset(knots, [f"p{i}" for i in range(len(knots))])
+    env = PathTrackingEnv(TrackingEnvCfg(num_envs=4, seed=0), robot, paths, build_reward_terms(reward))
+    assert env.tcp_reward and env.fk is not None and env.num_obs == make_env("armar4", num_envs=4)[0].num_obs
+    for _ in range(3):
+        env.step(torch.full((4, env.num_actions), 0.4))
+    ref = env.pos.clone()
+    ref[:, env.path_index] = env.paths.position_at(env.seg_path, env.s)
+    d = (env.fk.tcp_positions(ref) - env.fk.tcp_positions(env.pos)).norm(dim=2).mean(dim=1)  # (N,) m, two hands
+    assert float(d.min()) > 1e-3  # the robot has left its path
+    before = env.ep_reward["tcp_deviation"].clone()
+    env.step(torch.zeros(4, env.num_actions))
+    ref = env.pos.clone()
+    ref[:, env.path_index] = env.paths.position_at(env.seg_path, env.s)
+    d = (env.fk.tcp_positions(ref) - env.fk.tcp_positions(env.pos)).norm(dim=2).mean(dim=1)
+    expected = (1.0 - (d / 0.1).clamp(max=1.0)) ** 2
+    got = env.ep_reward["tcp_deviation"] - before
+    alive = env.episode_length_buf > 0  # no episode ended in this step
+    np.testing.assert_allclose(got[alive].numpy(), expected[alive].numpy(), atol=1e-9)
+
+
+def test_tcp_deviation_needs_no_feedback_but_ball_terms_do():
+    with pytest.raises(ValueError, match="ball_centre"):
+        robot = load_robot_by_name("iiwa7")
+        paths = build_pathset(smooth_paths(robot), ["a", "b", "c", "d"])
+        PathTrackingEnv(TrackingEnvCfg(num_envs=2), robot, paths, build_reward_terms({"ball_centre": {"weight": 1.0}}))
+
+
+def test_error_obs_appends_the_joint_tracking_error():
+    base, _ = make_env(num_envs=4)
+    env, _ = make_env(num_envs=4, error_obs=True, error_obs_scale=0.05)
+    n0, m = base.num_obs, env.robot.path_dof
+    assert env.num_obs == n0 + m and env.observation_layout()[-1] == ("error", n0, n0 + m)
+    obs = env.get_observations()["policy"]
+    assert torch.equal(obs[:, :n0], base.get_observations()["policy"])
+    assert float(obs[:, n0:].abs().max()) < 1e-6  # at the start the robot is on its path
+    for _ in range(3):
+        obs = env.step(torch.full((4, env.num_actions), 0.3))[0]["policy"]
+    err = (env.paths.position_at(env.seg_path, env.s) - env.pos[:, env.path_index]) / 0.05
+    np.testing.assert_allclose(obs[:, n0:].double().numpy(), err.clamp(-1, 1).numpy(), atol=1e-6)
+    assert float(err.abs().max()) > 1e-2  # the robot has left its path: the error is seen
+
+
+def test_error_obs_scale_is_validated():
+    with pytest.raises(ValueError, match="error_obs_scale"):
+        make_env(num_envs=2, error_obs=True, error_obs_scale=0.0)

@@ -11,7 +11,7 @@ import pytest
 import yaml
 
 from pathrl.cli.common import UserError, compose, to_container
-from pathrl.config.migrate import ADDED_KEYS, CONFIG_VERSION, NO_TASK, config_version, migrate
+from pathrl.config.migrate import ADDED_IN_V2, ADDED_KEYS, CONFIG_VERSION, NO_TASK, config_version, migrate
 from pathrl.config.schema import TrainAppCfg
 from pathrl.envs.tracking_cfg import EnvSettings, TrackingEnvCfg
 
@@ -73,11 +73,12 @@ def test_migrate_fills_a_version_0_config_with_the_old_behaviour():
     old = {"env": {"num_envs": 8, "tcp_obs_error": 0.2}, "knots": {"n_state": 5}, "seed": 3}
     new = migrate(old)
     assert old == {"env": {"num_envs": 8, "tcp_obs_error": 0.2}, "knots": {"n_state": 5}, "seed": 3}  # a copy
-    assert new["config_version"] == CONFIG_VERSION == 1
+    assert new["config_version"] == CONFIG_VERSION == 2
     assert new["task"] == {**NO_TASK, "adapt": {}}
     assert new["env"] == {"num_envs": 8, "tcp_obs_error": 0.2, "knot_obs": "relative", "end_obs": False,
                           "end_tolerance": None, "free_joint_actions": "linear", "posture_omega": 3.0,
-                          "tcp_obs": False, "tcp_obs_box": [-1.0, 1.0, -1.0, 1.0, -0.7, 1.3]}
+                          "tcp_obs": False, "tcp_obs_box": [-1.0, 1.0, -1.0, 1.0, -0.7, 1.3],
+                          "error_obs": False, "error_obs_scale": 0.1}
     assert "dataset" not in new  # groups the config lacks are not invented
     assert (new["init_from"], new["teacher"], new["residual"]) == (None, {}, {})
     assert new["critic_warmup"] == {"iterations": 0, "learning_rate": None}
@@ -85,6 +86,14 @@ def test_migrate_fills_a_version_0_config_with_the_old_behaviour():
     env = TrackingEnvCfg.from_run(old, seed=None)
     assert (env.free_joint_actions, env.end_obs, env.tcp_obs_error, env.n_state, env.seed) == ("linear", False, 0.2,
                                                                                                 5, 3)
+
+
+def test_migrate_fills_a_version_1_config_without_the_error_observation():
+    v1 = {"config_version": 1, "env": {"num_envs": 8, "tcp_obs": True}, "task": dict(NO_TASK), "knots": {"n_state": 5}}
+    new = migrate(v1)
+    assert new["env"] == {"num_envs": 8, "tcp_obs": True, "error_obs": False, "error_obs_scale": 0.1}
+    assert new["task"] == NO_TASK and "init_from" not in new  # the version 0 keys are not filled again
+    assert TrackingEnvCfg.from_run(new, seed=0).error_obs is False
 
 
 def test_migrate_leaves_a_current_config_alone_and_refuses_newer_ones():
@@ -102,7 +111,7 @@ def test_every_shipped_model_reads_its_saved_env_values_and_back_fills_the_rest(
     for key, value in saved["env"].items():
         assert _plain(getattr(env, key)) == value, key
     for key in set(DEFAULTS) - set(saved["env"]):
-        assert _plain(getattr(env, key)) == ADDED_KEYS[f"env.{key}"], key
+        assert _plain(getattr(env, key)) == {**ADDED_KEYS, **ADDED_IN_V2}[f"env.{key}"], key
     assert env.n_state == saved["knots"]["n_state"]
 
 

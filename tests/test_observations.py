@@ -84,7 +84,7 @@ def test_layout_covers_the_observation(variant, request):
         names = [name for name, _, _ in layout]
         assert names == [t for t in OBS_ORDER if t in names] and names[0] == "state"  # the fixed order
         assert ("feedback" in names) == (env.feedback is not None and env.cfg.feedback_obs)
-        assert ("tcp" in names) == env.cfg.tcp_obs
+        assert ("tcp" in names) == env.cfg.tcp_obs and ("error" in names) == env.cfg.error_obs
         detailed = env.observation_layout(fields=True)
         _covers(detailed, env.num_obs)
         assert detailed[-1][2] - detailed[0][1] == env.num_obs
@@ -94,7 +94,7 @@ def test_layout_covers_the_observation(variant, request):
 
 
 def test_term_order_is_fixed():
-    assert OBS_ORDER == ("state", "feedback", "tcp") == tuple(OBS_TERMS)
+    assert OBS_ORDER == ("state", "feedback", "tcp", "error") == tuple(OBS_TERMS)
 
 
 def test_each_term_fills_its_slice_in_the_shipped_order(request):

@@ -14,10 +14,10 @@ import copy
 from collections.abc import Callable, Mapping
 from typing import Any
 
-__all__ = ["ADDED_KEYS", "CONFIG_VERSION", "NO_TASK", "config_version", "migrate"]
+__all__ = ["ADDED_IN_V2", "ADDED_KEYS", "CONFIG_VERSION", "NO_TASK", "config_version", "migrate"]
 
 #: Version of the config layout written by this code.
-CONFIG_VERSION = 1
+CONFIG_VERSION = 2
 
 #: The task of configs saved before tasks existed (plain path tracking).
 NO_TASK: dict[str, Any] = {"name": "tracking", "feedback": None, "backend": "analytic", "workers": 2,
@@ -46,6 +46,13 @@ ADDED_KEYS: dict[str, Any] = {
 }
 
 
+#: Keys added in version 2 (the same convention as :data:`ADDED_KEYS`).
+ADDED_IN_V2: dict[str, Any] = {
+    "env.error_obs": False,
+    "env.error_obs_scale": 0.1,
+}
+
+
 def config_version(cfg: Mapping[str, Any]) -> int:
     """The layout version of a config (0: saved before ``config_version`` existed); ValueError for a version this
     code does not know (a config from newer code)."""
@@ -59,7 +66,17 @@ def config_version(cfg: Mapping[str, Any]) -> int:
 def _v0_to_v1(cfg: dict[str, Any]) -> None:
     """Version 0 -> 1: the task group of configs from before tasks, and every key of :data:`ADDED_KEYS`."""
     cfg["task"] = {**NO_TASK, **(cfg.get("task") or {})}
-    for dotted, value in ADDED_KEYS.items():
+    _fill(cfg, ADDED_KEYS)
+
+
+def _v1_to_v2(cfg: dict[str, Any]) -> None:
+    """Version 1 -> 2: the keys of :data:`ADDED_IN_V2` (the joint tracking error observation, off)."""
+    _fill(cfg, ADDED_IN_V2)
+
+
+def _fill(cfg: dict[str, Any], added: Mapping[str, Any]) -> None:
+    """Each ``group.key`` of `added` missing from `cfg` set to its value (when the group exists; top level always)."""
+    for dotted, value in added.items():
         group, _, key = dotted.rpartition(".")
         target = cfg.get(group) if group else cfg
         if isinstance(target, dict) and key not in target:
@@ -67,7 +84,7 @@ def _v0_to_v1(cfg: dict[str, Any]) -> None:
 
 
 #: Step ``k`` brings a version-``k`` config to version ``k + 1`` (in place).
-STEPS: tuple[Callable[[dict[str, Any]], None], ...] = (_v0_to_v1,)
+STEPS: tuple[Callable[[dict[str, Any]], None], ...] = (_v0_to_v1, _v1_to_v2)
 
 
 def migrate(cfg: Mapping[str, Any]) -> dict[str, Any]:

@@ -12,6 +12,8 @@ Terms (each: a pure function of env-state tensors -> (N, k) float64 before clipp
             ball's previous and current position on the plate, + the plate IMU)
   tcp       with ``tcp_obs``: per TCP the reference TCP position at s in ``tcp_obs_box`` -> [-1, 1], then reference
             minus commanded TCP / ``tcp_obs_error`` (:func:`tcp_observation`)
+  error     with ``error_obs``: per path joint the reference at s minus the commanded position / ``error_obs_scale``
+            (:func:`path_error`)
 
 :func:`observation_layout` (``env.observation_layout()``, also in ``env.describe()["obs_layout"]``) names the
 columns: (term, start, stop) slices that cover the observation exactly.
@@ -32,8 +34,8 @@ if TYPE_CHECKING:
     from pathrl.envs.tracking import PathTrackingEnv
 
 __all__ = ["OBS_ORDER", "OBS_TERMS", "ObsTerm", "active_terms", "assemble", "column_slices", "feedback_size",
-           "observation_layout", "observe_state", "state_fields", "state_size", "tcp_observation", "tcp_size",
-           "tracking_state"]
+           "observation_layout", "observe_state", "path_error", "reference_and_commanded_tcp", "state_fields",
+           "state_size", "tcp_distance", "tcp_observation", "tcp_size", "tracking_state"]
 
 
 @kernel(static=True)
@@ -123,17 +125,37 @@ def feedback_size(env: PathTrackingEnv) -> int:
     return int(env.feedback.num_obs)
 
 
+def reference_and_commanded_tcp(env: PathTrackingEnv, pos: Tensor, s: Tensor) -> tuple[Tensor, Tensor]:
+    """TCP positions (N, T, 3) in metres of the reference at arc length `s` (N,) (joints outside the path as
+    commanded) and of the commanded configuration `pos` (N, D), in one forward-kinematics call."""
+    ref = pos.clone()
+    ref[:, env.path_index] = env.paths.position_at(env.seg_path, s)
+    tcp = env.fk.tcp_positions(torch.cat([ref, pos]))
+    return tcp[:env.num_envs], tcp[env.num_envs:]
+
+
+def tcp_distance(env: PathTrackingEnv, pos: Tensor, s: Tensor) -> Tensor:
+    """Mean distance (N,) in metres of the commanded TCPs at `pos` (N, D) from the reference TCPs at `s` (N,)."""
+    ref, cmd = reference_and_commanded_tcp(env, pos, s)
+    return (ref - cmd).norm(dim=2).mean(dim=1)
+
+
 def _tcp(env: PathTrackingEnv) -> Tensor:
-    """Reference TCP (at the path position s; joints outside the path as commanded) and commanded TCP, in one
-    forward-kinematics call."""
-    ref = env.pos.clone()
-    ref[:, env.path_index] = env.paths.position_at(env.seg_path, env.s)
-    tcp = env.fk.tcp_positions(torch.cat([ref, env.pos]))
-    return tcp_observation(tcp[:env.num_envs], tcp[env.num_envs:], env.tcp_box, env.cfg.tcp_obs_error)
+    """The tcp term at the env's current state (reference at s)."""
+    ref, cmd = reference_and_commanded_tcp(env, env.pos, env.s)
+    return tcp_observation(ref, cmd, env.tcp_box, env.cfg.tcp_obs_error)
 
 
 def _tcp_size(env: PathTrackingEnv) -> int:
     return tcp_size(len(env.robot.tcps))
+
+
+def path_error(env: PathTrackingEnv) -> Tensor:
+    """The error term (N, M): per path joint the reference at the path position s minus the commanded position,
+    / ``error_obs_scale`` (rad). The knot window shows where the path goes; this shows how far off it the robot is
+    now, which the window gives only through the spline between its knots."""
+    ref = env.paths.position_at(env.seg_path, env.s)
+    return (ref - env.pos.index_select(1, env.path_index)) / env.cfg.error_obs_scale
 
 
 @dataclass(frozen=True)
@@ -154,6 +176,8 @@ OBS_TERMS: dict[str, ObsTerm] = {t.name: t for t in (
             "the task's sensor values (env.feedback_obs)"),
     ObsTerm("tcp", lambda env: bool(env.cfg.tcp_obs), _tcp_size, _tcp,
             "reference TCP and reference - commanded TCP (env.tcp_obs)"),
+    ObsTerm("error", lambda env: bool(env.cfg.error_obs), lambda env: len(env.path_index), path_error,
+            "reference at s - commanded position per path joint (env.error_obs)"),
 )}
 #: Their names in order.
 OBS_ORDER = tuple(OBS_TERMS)

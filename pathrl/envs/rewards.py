@@ -16,9 +16,9 @@ from typing import Any
 import torch
 from torch import Tensor
 
-__all__ = ["REWARD_TERMS", "TASK_VALUES", "RewardFn", "RewardTerm", "StepQuantities", "action_saturation",
+__all__ = ["ENV_VALUES", "REWARD_TERMS", "TASK_VALUES", "RewardFn", "RewardTerm", "StepQuantities", "action_saturation",
            "ball_centre", "ball_drive", "base_orientation", "base_position", "base_tilt", "build_reward_terms",
-           "deviation_max", "deviation_mean", "path_length"]
+           "deviation_max", "deviation_mean", "path_length", "tcp_deviation"]
 
 
 @dataclass(frozen=True)
@@ -74,6 +74,14 @@ def deviation_mean(q: StepQuantities, threshold: float = 0.25) -> Tensor:
     return _closeness(q.dev_mean, threshold)
 
 
+def tcp_deviation(q: StepQuantities, threshold: float = 0.1) -> Tensor:
+    """Cartesian closeness: (1 - min(1, d / threshold))^2, d = mean distance (m) of the commanded TCPs from the
+    reference TCPs at the step's end (value ``tcp_dev``, computed by the env). The authors' code had such a
+    Cartesian variant of R_d (0.1 m threshold), unused in their releases; it prices an offset of a joint by its
+    lever on the hands, which the joint-space terms do not (a torso offset costs what a wrist offset costs)."""
+    return _closeness(q.task["tcp_dev"], threshold)
+
+
 def action_saturation(q: StepQuantities, threshold: float = 0.9) -> Tensor:
     """Authors' iiwa action reward: rewards using the limits fully (max |action| near 1), 1 near the end.
 
@@ -127,6 +135,7 @@ REWARD_TERMS: dict[str, RewardFn] = {
     "path_length": path_length,
     "deviation_max": deviation_max,
     "deviation_mean": deviation_mean,
+    "tcp_deviation": tcp_deviation,
     "action_saturation": action_saturation,
     "ball_centre": ball_centre,
     "ball_drive": ball_drive,
@@ -139,7 +148,11 @@ REWARD_TERMS: dict[str, RewardFn] = {
 TASK_VALUES: dict[str, tuple[str, ...]] = {"ball_centre": ("ball_dist", "ball_on_plate"),
                                            "ball_drive": ("ball_drive", "ball_on_plate"), "base_tilt": ("base_tilt",),
                                            "base_position": ("base_offset",),
-                                           "base_orientation": ("base_orientation",)}
+                                           "base_orientation": ("base_orientation",),
+                                           "tcp_deviation": ("tcp_dev",)}
+
+#: Task values the env computes itself (no feedback source needed) when a reward term reads them.
+ENV_VALUES: tuple[str, ...] = ("tcp_dev",)
 
 
 @dataclass(frozen=True)

@@ -64,10 +64,11 @@ from pathrl.envs.observations import (  # observe_state, tcp_observation: moved,
     assemble,
     observation_layout,
     observe_state,
+    tcp_distance,
     tcp_observation,
     tracking_state,
 )
-from pathrl.envs.rewards import TASK_VALUES, RewardTerm, StepQuantities
+from pathrl.envs.rewards import ENV_VALUES, TASK_VALUES, RewardTerm, StepQuantities
 from pathrl.envs.terminations import TERMINATION_REASONS  # noqa: F401 (moved)
 from pathrl.envs.tracking_cfg import FREE_JOINT_ACTIONS, TrackingEnvCfg  # noqa: F401 (moved)
 from pathrl.limits.backend import current, env_scoped
@@ -123,6 +124,21 @@ def advance(pos: Tensor, vel: Tensor, acc: Tensor, a1: Tensor, path_index: Tenso
     return p1, v1, moved, dev_max, dev_mean
 
 
+def _values_read(reward_terms: list[RewardTerm], feedback: Feedback | None) -> set[str]:
+    """The task values the reward terms read; ValueError for a term whose values neither the feedback source nor
+    the env (:data:`ENV_VALUES`) provides."""
+    have = (set(feedback.value_names) if feedback is not None else set()) | set(ENV_VALUES)
+    read: set[str] = set()
+    for t in reward_terms:
+        needs = TASK_VALUES.get(t.fn.__name__, ())
+        missing = [v for v in needs if v not in have]
+        if missing:
+            raise ValueError(f"reward term {t.name!r} needs a task feedback providing {missing} "
+                             "(e.g. task=ball_on_plate)")
+        read.update(needs)
+    return read
+
+
 class PathTrackingEnv(_VecEnvBase):
     """N robots tracking reference path segments in parallel."""
 
@@ -145,12 +161,7 @@ class PathTrackingEnv(_VecEnvBase):
         self.generator.manual_seed(cfg.seed)
         self.limits = JointLimits.from_robot(robot, device=self.device)
         self.reward_terms = reward_terms
-        have = set(feedback.value_names) if feedback is not None else set()
-        for t in reward_terms:
-            missing = [v for v in TASK_VALUES.get(t.fn.__name__, ()) if v not in have]
-            if missing:
-                raise ValueError(f"reward term {t.name!r} needs a task feedback providing {missing} "
-                                 "(e.g. task=ball_on_plate)")
+        self.tcp_reward = "tcp_dev" in _values_read(reward_terms, feedback)
         self.paths = paths.to(self.device)
         if self.paths.dof != robot.path_dof:
             raise ValueError(f"paths have {self.paths.dof} joints, robot {robot.name} has {robot.path_dof} path joints")
@@ -165,6 +176,8 @@ class PathTrackingEnv(_VecEnvBase):
         self.dev_weights = w * math.sqrt(len(w) / float((w**2).sum()))
         self.max_episode_length = int(math.ceil(cfg.episode_budget_s / cfg.dt)) + 1
         self.fk = self.tcp_box = None
+        if self.tcp_reward:
+            self.fk = ForwardKinematics(robot, device=self.device)
         if cfg.tcp_obs:
             box = torch.as_tensor(cfg.tcp_obs_box, dtype=torch.float64, device=self.device)
             if box.shape != (6,) or not bool((box[1::2] > box[0::2]).all()) or not cfg.tcp_obs_error > 0:
@@ -369,6 +382,8 @@ class PathTrackingEnv(_VecEnvBase):
             task = fb.values
             if fb.failed is not None:
                 failed = fb.failed.to(self.device)
+        if self.tcp_reward:  # commanded vs reference TCPs at the step's end
+            task = {**task, "tcp_dev": tcp_distance(self, p1, torch.minimum(self.s + moved, self.end_s))}
         q = StepQuantities(
             moved=moved,
             l_state=(self.l_obs - self.s).clamp(min=0.0),

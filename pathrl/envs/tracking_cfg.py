@@ -49,6 +49,8 @@ class EnvSettings:
     tcp_obs: bool = False  # + per TCP the reference position at s and reference - commanded (the authors' ball state)
     tcp_obs_box: tuple[float, ...] = (-1.0, 1.0, -1.0, 1.0, -0.7, 1.3)  # x, y, z ranges (m) -> [-1, 1]
     tcp_obs_error: float = 0.1  # reference - commanded TCP (m) that maps to 1
+    error_obs: bool = False  # + per path joint the reference at s minus the commanded position (the tracking error)
+    error_obs_scale: float = 0.1  # tracking error (rad) that maps to 1
 
     @classmethod
     def from_mapping(cls, values: Mapping[str, Any], **extra: Any):
@@ -68,7 +70,7 @@ class EnvSettings:
         for key in ("num_envs", "substeps"):
             if int(getattr(self, key)) < 1:
                 raise ValueError(f"env.{key} must be >= 1, got {getattr(self, key)}")
-        for key in ("dt", "control_rate", "episode_budget_s", "posture_omega", "stop_tolerance"):
+        for key in ("dt", "control_rate", "episode_budget_s", "posture_omega", "stop_tolerance", "error_obs_scale"):
             if not float(getattr(self, key)) > 0.0:  # also refuses NaN
                 raise ValueError(f"env.{key} must be > 0, got {getattr(self, key)}")
         for key, allowed in (("segments", ("paper", "full")), ("knot_obs", ("relative", "absolute")),
