@@ -52,3 +52,29 @@ def test_tiny_distillation_lowers_the_loss_and_the_student_acts_on_the_policy_ob
     assert a.shape == (4, env.num_actions) and bool(torch.isfinite(a).all()) and float(a.abs().max()) > 0.0
     m = evaluate(env, lambda e: model(e.get_observations()), torch.arange(4))
     assert bool(((m["fraction"] >= 0) & (m["fraction"] <= 1)).all()) and bool((m["acc"] > 0).all())
+
+
+def test_recurrent_student_trains_loads_and_starts_each_batch_with_a_clear_memory(tiny_trueadapt, tmp_path):
+    from rsl_rl.models import RNNModel
+
+    from pathrl.envs.trueadapt import build_trueadapt_env
+    from pathrl.eval.evaluate import load_policy, load_run
+    from pathrl.eval.trueadapt import ObservingPolicy, run_trajectories
+    from pathrl.train.runner import train
+
+    run_dir = tmp_path / "gru"
+    train(_cfg("iiwa7_trueadapt_in_place_distill_gru", tiny_trueadapt.path, run_dir, 4), run_dir)
+    loss = [m["values"]["Loss/behavior"] for t, _, m in read_messages(run_dir / "run.mcap") if t == "/train/scalars"]
+    assert len(loss) == 4 and loss[-1] < loss[0], loss
+    cfg, ckpt, _ = load_run(run_dir)
+    env = build_trueadapt_env(cfg, "test", num_envs=2, autoreset=False)
+    model = load_policy(cfg, env, ckpt)
+    assert isinstance(model, RNNModel) and model.is_recurrent
+    policy = ObservingPolicy(model)
+    batch = torch.arange(2)
+    first = run_trajectories(env, policy, batch)
+    assert model.rnn.hidden_state is not None  # it carried a memory through the episodes
+    fresh = build_trueadapt_env(cfg, "test", num_envs=2, autoreset=False)  # the same episodes, same random draws
+    again = run_trajectories(fresh, policy, batch)  # the memory left by the first batch is cleared: same results
+    for k in first:
+        assert torch.equal(first[k], again[k]), k

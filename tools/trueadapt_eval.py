@@ -29,7 +29,7 @@ from pathrl.cli.common import compose, to_container
 from pathrl.config.schema import TrainAppCfg
 from pathrl.envs.trueadapt import build_trueadapt_env
 from pathrl.eval.evaluate import committed_split
-from pathrl.eval.trueadapt import evaluate, reference_policy, summary
+from pathrl.eval.trueadapt import ObservingPolicy, evaluate, reference_policy, summary
 from pathrl.eval.trueadapt_limits import LimitCounter
 
 
@@ -102,9 +102,7 @@ def main() -> None:
     except ValueError as exc:
         raise SystemExit(f"error: {exc}") from None
 
-    def policy(e):
-        return reference_policy(e) if actor is None else actor(e.get_observations())
-
+    policy = reference_policy if actor is None else ObservingPolicy(actor)
     traj = torch.arange(args.episodes) % env.bank.num
     limits = LimitCounter(env)
     t0 = time.perf_counter()

@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 import torch
 import yaml
-from rsl_rl.models import MLPModel
+from rsl_rl.models import MLPModel, RNNModel
 from tensordict import TensorDict
 
 from pathrl.baselines.controllers import make_controller
@@ -109,7 +109,8 @@ def load_run(run_dir: Path) -> tuple[dict[str, Any], Path | None, dict[str, Any]
 #: Policy network classes a run's config may name (``agent.actor`` or ``agent.student``): evaluation builds
 #: nothing else from a config it is handed.
 POLICY_MODELS = {"MLPModel": MLPModel, "rsl_rl.models:MLPModel": MLPModel,
-                 "pathrl.train.models:MixedPrecisionMLPModel": MixedPrecisionMLPModel}
+                 "pathrl.train.models:MixedPrecisionMLPModel": MixedPrecisionMLPModel,
+                 "RNNModel": RNNModel, "rsl_rl.models:RNNModel": RNNModel}
 
 
 def load_policy(cfg: dict[str, Any], env: PathTrackingEnv, ckpt: Path) -> torch.nn.Module:

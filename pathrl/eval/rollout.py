@@ -15,7 +15,7 @@ from pathrl.envs.tracking import PathTrackingEnv
 from pathrl.limits.integrate import interpolate_step
 from pathrl.paths.segments import Segments
 
-__all__ = ["EpisodeRecord", "Policy", "rollout"]
+__all__ = ["EpisodeRecord", "Policy", "reset_memory", "rollout"]
 
 
 Policy = Callable[[TensorDict], Tensor]
@@ -47,6 +47,14 @@ class EpisodeRecord:
         return float(self.extra["dt"]) * self.steps
 
 
+def reset_memory(policy: object) -> None:
+    """Clear a recurrent policy's hidden state before a batch of new episodes (``policy.reset()``, as rsl-rl's
+    models have it; a memoryless policy's reset does nothing, a plain function has none)."""
+    reset = getattr(policy, "reset", None)
+    if callable(reset):
+        reset()
+
+
 def rollout(env: PathTrackingEnv, policy: Policy, plan: Segments, progress: Callable[[int], None] | None = None,
             ) -> list[EpisodeRecord]:
     """Run every segment of `plan` once with `policy` (batches of env.num_envs); no auto-reset."""
@@ -68,6 +76,7 @@ def _rollout_batch(env: PathTrackingEnv, policy: Policy, plan: Segments, ids: Te
     seg = Segments(plan.path[ids].to(dev), plan.start_s[ids].to(dev), plan.end_s[ids].to(dev),
                    plan.end_knot[ids].to(dev))
     env.start_segments(env_ids, seg)
+    reset_memory(policy)
     active = torch.zeros(env.num_envs, dtype=torch.bool, device=dev)
     active[:k] = True
     done_step = torch.full((env.num_envs,), -1, dtype=torch.long, device=dev)

@@ -18,8 +18,9 @@ from torch import Tensor
 
 from pathrl.envs.terminations import TerminationReason
 from pathrl.envs.trueadapt import TrueAdaptEnv
+from pathrl.eval.rollout import reset_memory
 
-__all__ = ["METRICS", "OUTCOMES", "evaluate", "reference_policy", "run_trajectories", "summary"]
+__all__ = ["METRICS", "OUTCOMES", "ObservingPolicy", "evaluate", "reference_policy", "run_trajectories", "summary"]
 
 Policy = Callable[[TrueAdaptEnv], Tensor]
 
@@ -27,6 +28,23 @@ Policy = Callable[[TrueAdaptEnv], Tensor]
 def reference_policy(env: TrueAdaptEnv) -> Tensor:
     """No adaptation: replay the reference's accelerations."""
     return env.reference_actions()
+
+
+class ObservingPolicy:
+    """A :data:`Policy` of an actor (observations -> actions (N, D)), e.g. a policy network or a controller:
+    ``policy(env)`` acts on the env's observations; ``reset()`` clears a recurrent actor's memory (a new batch of
+    episodes starts)."""
+
+    def __init__(self, actor: Callable[..., Tensor]):
+        self.actor = actor
+
+    def __call__(self, env: TrueAdaptEnv) -> Tensor:
+        """The actor's actions (N, D) on the env's current observations."""
+        return self.actor(env.get_observations())
+
+    def reset(self) -> None:
+        """Clear the actor's hidden state, if it has one."""
+        reset_memory(self.actor)
 
 
 #: Per-trajectory outcomes (0/1) and metrics of :func:`run_trajectories`: success and failed (the ball was lost,
@@ -46,6 +64,7 @@ def run_trajectories(env: TrueAdaptEnv, policy: Policy, batch: Tensor,
     n = len(batch)
     ids = torch.arange(n, device=env.device)
     env.start(ids, batch.to(env.device))
+    reset_memory(policy)
     out = {k: torch.zeros(n, dtype=torch.float64) for k in (*OUTCOMES, *METRICS)}
     pending = torch.zeros(env.num_envs, dtype=torch.bool, device=env.device)
     pending[ids] = True

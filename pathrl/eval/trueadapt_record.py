@@ -22,7 +22,7 @@ from torch import Tensor
 
 from pathrl.envs.feedback import PLATE_SIZE, plate_pose
 from pathrl.envs.trueadapt import TrueAdaptEnv
-from pathrl.eval.trueadapt import run_trajectories
+from pathrl.eval.trueadapt import ObservingPolicy, run_trajectories
 from pathrl.logging.mcap_io import McapJsonWriter
 from pathrl.logging.schema import LIMIT_FIELDS, TRUEADAPT_EPISODE, TRUEADAPT_ROBOT, TRUEADAPT_STEP
 from pathrl.robot.kinematics import ForwardKinematics, matrix_to_quat
@@ -72,7 +72,7 @@ def run_batch(env: TrueAdaptEnv, actor: Actor, traj: Tensor) -> _Batch:
         _snapshot(env, b, n)
         b.length[stepped] += 1
 
-    b.outcome = run_trajectories(env, lambda e: actor(e.get_observations()), traj, keep)
+    b.outcome = run_trajectories(env, ObservingPolicy(actor), traj, keep)
     return b
 
 
