@@ -50,6 +50,7 @@ ADDED_KEYS: dict[str, Any] = {
 ADDED_IN_V2: dict[str, Any] = {
     "env.error_obs": False,
     "env.error_obs_scale": 0.1,
+    "bias_search": {},
 }
 
 
@@ -70,7 +71,7 @@ def _v0_to_v1(cfg: dict[str, Any]) -> None:
 
 
 def _v1_to_v2(cfg: dict[str, Any]) -> None:
-    """Version 1 -> 2: the keys of :data:`ADDED_IN_V2` (the joint tracking error observation, off)."""
+    """Version 1 -> 2: the keys of :data:`ADDED_IN_V2` (the joint tracking error observation off, no bias search)."""
     _fill(cfg, ADDED_IN_V2)
 
 

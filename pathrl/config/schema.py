@@ -229,3 +229,6 @@ class TrainAppCfg:
     # PPO on a residual over a controller: {scale, controller: {name: tray, ...}} (pathrl.policy.residual)
     residual: dict[str, Any] = field(default_factory=dict)
     path_change: PathChangeCfg | None = None  # path changes during training (path_change=train); None: none
+    # before PPO, search the warm-started actor's output offsets on the training return ({episodes, max_evals,
+    # bound, seed}; pathrl.train.bias_search); empty: none
+    bias_search: dict[str, Any] = field(default_factory=dict)

@@ -279,6 +279,10 @@ def train(cfg: dict[str, Any], run_dir: Path, resume: bool = False) -> dict[str,
         warm_start(runner.alg, cfg["init_from"], env.num_obs, _init_std(cfg), env.robot.joints, env.robot.path_joints)
     elif cfg.get("residual"):
         zero_last_layer(runner.alg.get_policy())  # the untrained residual policy is its controller
+    if ckpt is None and cfg.get("bias_search"):
+        record = _bias_search(cfg, runner.alg.get_policy(), env.knot_gap)
+        summary = json.loads((run_dir / "summary.json").read_text())
+        write_json_atomic(run_dir / "summary.json", {**summary, "bias_search": record})
     warmup = cfg.get("critic_warmup") or {}
     if int(warmup.get("iterations") or 0) > 0:
         lr = warmup.get("learning_rate")
@@ -312,6 +316,8 @@ def train(cfg: dict[str, Any], run_dir: Path, resume: bool = False) -> dict[str,
         "checkpoint": last_ckpt.name if last_ckpt else None,
         "mean_reward": float(torch.tensor(list(runner.logger.rewbuffer)).mean()) if runner.logger.rewbuffer else None,
     }
+    kept = json.loads((run_dir / "summary.json").read_text()).get("bias_search")
+    summary.update({"bias_search": kept} if kept else {})  # the search before PPO (its own wall time)
     write_json_atomic(run_dir / "summary.json", summary)
     return summary
 
@@ -346,6 +352,21 @@ def float32_iteration(fraction: Any, total: int) -> int:
 def _init_std(cfg: dict[str, Any]) -> float:
     """The initial action std of the policy (the PPO actor or the distillation student)."""
     return float(cfg["agent"][policy_role(cfg["agent"])]["distribution_cfg"].get("init_std", 1.0))
+
+
+def _bias_search(cfg: dict[str, Any], actor: torch.nn.Module, knot_gap: float) -> dict[str, Any]:
+    """Search the actor's output offsets on the training return before PPO (:mod:`pathrl.train.bias_search`), on an
+    env of its own (``bias_search.episodes`` envs, the run's training settings); the search's record."""
+    from pathrl.train.bias_search import BiasSearchCfg, search_output_bias
+
+    if cfg["agent"]["algorithm"]["class_name"] != "PPO" or cfg.get("residual"):
+        raise ValueError("bias_search: only for a PPO run without residual (a trained actor's output offsets)")
+    bs = BiasSearchCfg(**cfg["bias_search"])
+    search_env = make_env(cfg, "train", num_envs=bs.episodes, seed=bs.seed, knot_gap_norm=knot_gap)
+    record = search_output_bias(search_env, actor, bs)
+    print(f"bias_search: mean training return {record['mean_return_before']:.3f} -> {record['mean_return_after']:.3f} "
+          f"in {record['evaluations']} evaluations ({record['wall_time_s']} s)", file=sys.stderr)
+    return record
 
 
 def _with_teacher(cfg: dict[str, Any], env: PathTrackingEnv):
