@@ -43,16 +43,17 @@ def test_episode_returns_sum_each_episodes_rewards_to_its_end():
     env, _ = make_env(num_envs=6)
     policy, _ = _policy(env, 0.3)
     plan = evaluation_plan(env.paths, 6, "paper", seed=1)
-    got = episode_returns(env, policy, plan)
+    got, steps = episode_returns(env, policy, plan)
     env.start_segments(torch.arange(6), plan)  # the same pass, by hand: rewards until each env's first done
-    total, ended = torch.zeros(6, dtype=torch.float64), torch.zeros(6, dtype=torch.bool)
+    total, ended, taken = torch.zeros(6, dtype=torch.float64), torch.zeros(6, dtype=torch.bool), 0
     while not bool(ended.all()):
+        taken += 1
         _, r, dones, _ = env.step(policy(env.get_observations()))
         total += torch.where(ended, 0.0, r.double())
         ended |= dones
     torch.testing.assert_close(got, total)
-    assert bool((got > 0).all())
-    torch.testing.assert_close(episode_returns(env, policy, plan), got)  # a deterministic function of the plan
+    assert bool((got > 0).all()) and steps == 6 * taken
+    torch.testing.assert_close(episode_returns(env, policy, plan)[0], got)  # a deterministic function of the plan
 
 
 def test_search_moves_the_output_bias_in_place_and_never_lowers_the_return():
@@ -71,6 +72,7 @@ def test_search_moves_the_output_bias_in_place_and_never_lowers_the_return():
     before = output_layer(actor).bias.detach().clone()
     rec = search_output_bias(env, actor, BiasSearchCfg(episodes=8, max_evals=40))
     assert rec["mean_return_after"] > rec["mean_return_before"] and rec["evaluations"] <= 42
+    assert rec["env_steps"] >= 8 * rec["evaluations"]
     torch.testing.assert_close(output_layer(actor).bias.detach(), before + torch.tensor(rec["offsets"]))
     assert max(abs(x) for x in rec["offsets"]) <= 1.0
 
@@ -87,6 +89,9 @@ def test_train_runs_the_search_before_ppo_and_records_it(tiny_dataset, tmp_path)
     r = run(train_cmd(tiny_dataset, run_dir, 1, "+bias_search.episodes=8", "+bias_search.max_evals=5"))
     assert r.returncode == 0, r.stderr[-2000:]
     assert "bias_search: mean training return" in r.stderr
-    rec = json.loads((run_dir / "summary.json").read_text())["bias_search"]
+    summary = json.loads((run_dir / "summary.json").read_text())
+    rec = summary["bias_search"]
     assert rec["episodes"] == 8 and 1 <= rec["evaluations"] <= 7 and len(rec["offsets"]) == 7
     assert rec["mean_return_after"] >= rec["mean_return_before"]
+    # the search is training time: in the wall time and the env steps (1 PPO iteration = 32 envs x 8 steps)
+    assert summary["wall_time_s"] >= rec["wall_time_s"] and summary["env_steps"] == 32 * 8 + rec["env_steps"]

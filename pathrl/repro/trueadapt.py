@@ -81,7 +81,9 @@ class AdaptRow:
 
 
 DISTILL = "iiwa7_trueadapt_on_plate_distill"
+DISTILL_IN_PLACE = "iiwa7_trueadapt_in_place_distill_f10"
 _STUDENT = "distilled policy"
+_STUDENT_F10 = "distilled policy, ten following positions in its state (the paper's: one)"
 _TRAY = "**tray controller: privileged information, not in the paper**"
 
 ROWS: tuple[AdaptRow, ...] = (
@@ -104,9 +106,11 @@ ROWS: tuple[AdaptRow, ...] = (
              AdaptEval("on_plate", "iiwa7_trueadapt_on_plate_tray_controller"), in_paper=False),
     AdaptRow("in_place/reference", "in place: reference trajectories (no adaptations)", "the reference replayed",
              AdaptEval("in_place")),
-    AdaptRow("in_place/test_set", "in place: TrueAdapt, test set", "no shipped in-place policy"),
+    AdaptRow("in_place/test_set", "in place: TrueAdapt, test set", _STUDENT_F10,
+             AdaptEval("in_place", DISTILL_IN_PLACE)),
     AdaptRow("in_place/real_robot", "in place: TrueAdapt, real robot", "no real robot"),
-    AdaptRow("in_place/open_loop_evaluation", "in place: open loop, evaluation only", "no shipped in-place policy"),
+    AdaptRow("in_place/open_loop_evaluation", "in place: open loop, evaluation only",
+             _STUDENT_F10 + ", ball measurement frozen", AdaptEval("in_place", DISTILL_IN_PLACE, open_loop=True)),
     AdaptRow("in_place/open_loop_training", "in place: open loop, training and evaluation", "not trained"),
     AdaptRow("in_place/tray_controller", "in place: model-based tray controller", _TRAY,
              AdaptEval("in_place", "iiwa7_trueadapt_in_place_tray_controller"), in_paper=False),

@@ -50,9 +50,10 @@ class BiasSearchCfg:
             raise ValueError(f"bias_search.bound must be > 0, got {self.bound}")
 
 
-def episode_returns(env: Any, policy: Callable[[Any], Tensor], plan: Segments) -> Tensor:
+def episode_returns(env: Any, policy: Callable[[Any], Tensor], plan: Segments) -> tuple[Tensor, int]:
     """Undiscounted returns (E,) of one deterministic pass: env i runs segment i of `plan` (E = env.num_envs) until
-    its episode ends (stop, deviation cut-off or budget); later steps of an ended env are not counted."""
+    its episode ends (stop, deviation cut-off or budget); later steps of an ended env are not counted. Also the env
+    steps simulated (E per step of the pass)."""
     n = env.num_envs
     if len(plan) != n:
         raise ValueError(f"plan has {len(plan)} segments for {n} envs")
@@ -61,7 +62,9 @@ def episode_returns(env: Any, policy: Callable[[Any], Tensor], plan: Segments) -
                        Segments(plan.path.to(dev), plan.start_s.to(dev), plan.end_s.to(dev), plan.end_knot.to(dev)))
     total = torch.zeros(n, dtype=torch.float64, device=dev)
     active = torch.ones(n, dtype=torch.bool, device=dev)
+    steps = 0
     for _ in range(int(env.max_episode_length) + 1):
+        steps += n
         with torch.inference_mode():
             actions = policy(env.get_observations())
         _, reward, dones, _ = env.step(actions)
@@ -69,7 +72,7 @@ def episode_returns(env: Any, policy: Callable[[Any], Tensor], plan: Segments) -
         active &= ~dones
         if not bool(active.any()):
             break
-    return total
+    return total, steps
 
 
 def output_layer(actor: torch.nn.Module) -> torch.nn.Linear:
@@ -102,10 +105,14 @@ def search_output_bias(env: Any, actor: torch.nn.Module, cfg: BiasSearchCfg) -> 
     was_training = actor.training
     actor.eval()
 
+    steps = [0]  # env steps simulated (every env of every pass, as long as the pass runs)
+
     def mean_return(offsets: np.ndarray) -> float:
         with torch.no_grad():
             layer.bias.copy_(base + torch.as_tensor(offsets, dtype=base.dtype, device=base.device))
-        return float(episode_returns(env, actor, plan).mean())
+        returns, n = episode_returns(env, actor, plan)
+        steps[0] += n
+        return float(returns.mean())
 
     t0 = time.perf_counter()
     try:
@@ -118,5 +125,5 @@ def search_output_bias(env: Any, actor: torch.nn.Module, cfg: BiasSearchCfg) -> 
         layer.bias.add_(torch.as_tensor(best, dtype=base.dtype, device=base.device))
     actor.train(was_training)
     return {"offsets": [round(float(x), 6) for x in best], "mean_return_before": before, "mean_return_after": value,
-            "evaluations": evals, "episodes": cfg.episodes, "seed": cfg.seed, "bound": cfg.bound,
+            "evaluations": evals, "env_steps": steps[0], "episodes": cfg.episodes, "seed": cfg.seed, "bound": cfg.bound,
             "wall_time_s": round(time.perf_counter() - t0, 1)}

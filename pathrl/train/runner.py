@@ -281,8 +281,9 @@ def train(cfg: dict[str, Any], run_dir: Path, resume: bool = False) -> dict[str,
         zero_last_layer(runner.alg.get_policy())  # the untrained residual policy is its controller
     if ckpt is None and cfg.get("bias_search"):
         record = _bias_search(cfg, runner.alg.get_policy(), env.knot_gap)
-        summary = json.loads((run_dir / "summary.json").read_text())
-        write_json_atomic(run_dir / "summary.json", {**summary, "bias_search": record})
+        prev = {**json.loads((run_dir / "summary.json").read_text()), "bias_search": record}
+        prev["wall_time_s"] = float(prev.get("wall_time_s", 0.0)) + record["wall_time_s"]  # counted as training time
+        write_json_atomic(run_dir / "summary.json", prev)
     warmup = cfg.get("critic_warmup") or {}
     if int(warmup.get("iterations") or 0) > 0:
         lr = warmup.get("learning_rate")
@@ -317,7 +318,8 @@ def train(cfg: dict[str, Any], run_dir: Path, resume: bool = False) -> dict[str,
         "mean_reward": float(torch.tensor(list(runner.logger.rewbuffer)).mean()) if runner.logger.rewbuffer else None,
     }
     kept = json.loads((run_dir / "summary.json").read_text()).get("bias_search")
-    summary.update({"bias_search": kept} if kept else {})  # the search before PPO (its own wall time)
+    if kept:  # the search before PPO: its wall time is in wall_time_s already, its env steps are added here
+        summary.update({"bias_search": kept, "env_steps": summary["env_steps"] + int(kept.get("env_steps", 0))})
     write_json_atomic(run_dir / "summary.json", summary)
     return summary
 
