@@ -13,6 +13,7 @@ from test_train import run, train_cmd
 
 from pathrl.paths.segments import evaluation_plan
 from pathrl.train.bias_search import BiasSearchCfg, episode_returns, output_layer, search_bias, search_output_bias
+from pathrl.train.ship import ship
 
 
 def test_search_finds_the_maximum_of_a_quadratic_inside_the_bounds():
@@ -95,3 +96,5 @@ def test_train_runs_the_search_before_ppo_and_records_it(tiny_dataset, tmp_path)
     assert rec["mean_return_after"] >= rec["mean_return_before"]
     # the search is training time: in the wall time and the env steps (1 PPO iteration = 32 envs x 8 steps)
     assert summary["wall_time_s"] >= rec["wall_time_s"] and summary["env_steps"] == 32 * 8 + rec["env_steps"]
+    shipped = json.loads((ship(run_dir, tmp_path / "model") / "summary.json").read_text())
+    assert shipped["env_steps"] == summary["env_steps"] and shipped["wall_time_s"] >= rec["wall_time_s"]

@@ -93,6 +93,10 @@ def ship(run_dir: Path, dest: Path) -> Path:
     summary = json.loads((run_dir / "summary.json").read_text()) if (run_dir / "summary.json").is_file() else {}
     per_iter, msgs = read_training_log(run_dir, int(state["iter"]))
     summary.update(training_stats(per_iter, msgs, int(state["iter"])))
+    if summary.get("bias_search"):  # the output-bias search before PPO is training too (pathrl.train.bias_search)
+        bs = summary["bias_search"]
+        summary["env_steps"] += int(bs.get("env_steps", 0))
+        summary["wall_time_s"] = round(summary["wall_time_s"] + float(bs.get("wall_time_s", 0.0)), 1)
     summary["shipped_from"] = str(run_dir)
     write_json_atomic(dest / "summary.json", summary)
     if msgs:
