@@ -280,10 +280,7 @@ def train(cfg: dict[str, Any], run_dir: Path, resume: bool = False) -> dict[str,
     elif cfg.get("residual"):
         zero_last_layer(runner.alg.get_policy())  # the untrained residual policy is its controller
     if ckpt is None and cfg.get("bias_search"):
-        record = _bias_search(cfg, runner.alg.get_policy(), env.knot_gap)
-        prev = {**json.loads((run_dir / "summary.json").read_text()), "bias_search": record}
-        prev["wall_time_s"] = float(prev.get("wall_time_s", 0.0)) + record["wall_time_s"]  # counted as training time
-        write_json_atomic(run_dir / "summary.json", prev)
+        prev = _bias_search(cfg, runner.alg.get_policy(), env.knot_gap, run_dir / "summary.json")
     warmup = cfg.get("critic_warmup") or {}
     if int(warmup.get("iterations") or 0) > 0:
         lr = warmup.get("learning_rate")
@@ -356,9 +353,10 @@ def _init_std(cfg: dict[str, Any]) -> float:
     return float(cfg["agent"][policy_role(cfg["agent"])]["distribution_cfg"].get("init_std", 1.0))
 
 
-def _bias_search(cfg: dict[str, Any], actor: torch.nn.Module, knot_gap: float) -> dict[str, Any]:
+def _bias_search(cfg: dict[str, Any], actor: torch.nn.Module, knot_gap: float, summary: Path) -> dict[str, Any]:
     """Search the actor's output offsets on the training return before PPO (:mod:`pathrl.train.bias_search`), on an
-    env of its own (``bias_search.episodes`` envs, the run's training settings); the search's record."""
+    env of its own (``bias_search.episodes`` envs, the run's training settings); records the search in the run's
+    `summary` (its wall time counted as training time) and returns the updated summary."""
     from pathrl.train.bias_search import BiasSearchCfg, search_output_bias
 
     if cfg["agent"]["algorithm"]["class_name"] != "PPO" or cfg.get("residual"):
@@ -368,7 +366,10 @@ def _bias_search(cfg: dict[str, Any], actor: torch.nn.Module, knot_gap: float) -
     record = search_output_bias(search_env, actor, bs)
     print(f"bias_search: mean training return {record['mean_return_before']:.3f} -> {record['mean_return_after']:.3f} "
           f"in {record['evaluations']} evaluations ({record['wall_time_s']} s)", file=sys.stderr)
-    return record
+    out = {**json.loads(summary.read_text()), "bias_search": record}
+    out["wall_time_s"] = float(out.get("wall_time_s", 0.0)) + record["wall_time_s"]
+    write_json_atomic(summary, out)
+    return out
 
 
 def _with_teacher(cfg: dict[str, Any], env: PathTrackingEnv):
