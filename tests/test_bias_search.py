@@ -18,15 +18,15 @@ from pathrl.train.ship import ship
 
 def test_search_finds_the_maximum_of_a_quadratic_inside_the_bounds():
     c = np.array([0.3, -0.55, 0.0])
-    best, value, evals = search_bias(lambda x: -float(((x - c) ** 2).sum()), 3, max_evals=300, bound=1.0)
+    best, value, start, evals = search_bias(lambda x: -float(((x - c) ** 2).sum()), 3, max_evals=300, bound=1.0)
     np.testing.assert_allclose(best, c, atol=0.02)
-    assert value == pytest.approx(0.0, abs=1e-3) and evals <= 302
+    assert value == pytest.approx(0.0, abs=1e-3) and evals <= 302 and start == pytest.approx(-(c**2).sum())
 
 
 def test_search_stays_at_zero_when_zero_is_best_and_respects_the_bound():
-    best, value, _ = search_bias(lambda x: -float(np.abs(x).sum()), 4, max_evals=100, bound=0.5)
+    best, value, _, _ = search_bias(lambda x: -float(np.abs(x).sum()), 4, max_evals=100, bound=0.5)
     assert np.array_equal(best, np.zeros(4)) and value == 0.0
-    best, _, _ = search_bias(lambda x: float(x[0]), 1, max_evals=100, bound=0.5)  # the maximum is on the bound
+    best, _, _, _ = search_bias(lambda x: float(x[0]), 1, max_evals=100, bound=0.5)  # the maximum is on the bound
     assert 0.45 <= best[0] <= 0.5
 
 

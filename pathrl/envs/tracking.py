@@ -175,15 +175,14 @@ class PathTrackingEnv(_VecEnvBase):
         w = torch.as_tensor(robot.deviation_weights, dtype=torch.float64, device=self.device)
         self.dev_weights = w * math.sqrt(len(w) / float((w**2).sum()))
         self.max_episode_length = int(math.ceil(cfg.episode_budget_s / cfg.dt)) + 1
-        self.fk = self.tcp_box = None
-        if self.tcp_reward:
-            self.fk = ForwardKinematics(robot, device=self.device)
+        self.tcp_box = None
+        self.fk = ForwardKinematics(robot, device=self.device) if self.tcp_reward or cfg.tcp_obs else None
         if cfg.tcp_obs:
             box = torch.as_tensor(cfg.tcp_obs_box, dtype=torch.float64, device=self.device)
             if box.shape != (6,) or not bool((box[1::2] > box[0::2]).all()) or not cfg.tcp_obs_error > 0:
                 raise ValueError("env.tcp_obs_box must be 6 numbers (x, y, z [min, max], min < max) and "
                                  f"env.tcp_obs_error > 0, got {list(cfg.tcp_obs_box)}, {cfg.tcp_obs_error}")
-            self.fk, self.tcp_box = ForwardKinematics(robot, device=self.device), box.reshape(3, 2)
+            self.tcp_box = box.reshape(3, 2)
 
         f64 = dict(dtype=torch.float64, device=self.device)
         d = robot.dof

@@ -73,8 +73,7 @@ def _rollout_batch(env: PathTrackingEnv, policy: Policy, plan: Segments, ids: Te
     k = len(ids)
     dev = env.device
     env_ids = torch.arange(k, device=dev)
-    seg = Segments(plan.path[ids].to(dev), plan.start_s[ids].to(dev), plan.end_s[ids].to(dev),
-                   plan.end_knot[ids].to(dev))
+    seg = plan.subset(ids).to(dev)
     env.start_segments(env_ids, seg)
     reset_memory(policy)
     active = torch.zeros(env.num_envs, dtype=torch.bool, device=dev)

@@ -32,6 +32,14 @@ class Segments:
     def __len__(self) -> int:
         return int(self.path.shape[0])
 
+    def subset(self, ids: Tensor) -> Segments:
+        """The segments `ids` (K,) of this batch."""
+        return Segments(self.path[ids], self.start_s[ids], self.end_s[ids], self.end_knot[ids])
+
+    def to(self, device: torch.device | str) -> Segments:
+        """The same segments on `device`."""
+        return Segments(self.path.to(device), self.start_s.to(device), self.end_s.to(device), self.end_knot.to(device))
+
 
 def sample_segments(
     paths: PathSet,

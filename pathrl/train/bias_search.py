@@ -58,8 +58,7 @@ def episode_returns(env: Any, policy: Callable[[Any], Tensor], plan: Segments) -
     if len(plan) != n:
         raise ValueError(f"plan has {len(plan)} segments for {n} envs")
     dev = env.device
-    env.start_segments(torch.arange(n, device=dev),
-                       Segments(plan.path.to(dev), plan.start_s.to(dev), plan.end_s.to(dev), plan.end_knot.to(dev)))
+    env.start_segments(torch.arange(n, device=dev), plan.to(dev))
     total = torch.zeros(n, dtype=torch.float64, device=dev)
     active = torch.ones(n, dtype=torch.bool, device=dev)
     steps = 0
@@ -84,15 +83,15 @@ def output_layer(actor: torch.nn.Module) -> torch.nn.Linear:
 
 
 def search_bias(objective: Callable[[np.ndarray], float], dim: int, max_evals: int, bound: float,
-                ) -> tuple[np.ndarray, float, int]:
+                ) -> tuple[np.ndarray, float, float, int]:
     """Maximise `objective` over offsets in [-bound, bound]^dim from 0 (scipy Powell); (best offsets, best value,
-    evaluations). The start point is evaluated first, and the result is never worse than it."""
+    value at the start, evaluations). The start point is evaluated first, and the result is never worse than it."""
     f0 = objective(np.zeros(dim))
     res = minimize(lambda x: -objective(np.asarray(x)), np.zeros(dim), method="Powell",
                    bounds=[(-bound, bound)] * dim, options={"maxfev": max_evals, "xtol": 1e-2, "ftol": 1e-5})
     if -float(res.fun) <= f0:
-        return np.zeros(dim), f0, int(res.nfev) + 1
-    return np.asarray(res.x, dtype=np.float64), -float(res.fun), int(res.nfev) + 1
+        return np.zeros(dim), f0, f0, int(res.nfev) + 1
+    return np.asarray(res.x, dtype=np.float64), -float(res.fun), f0, int(res.nfev) + 1
 
 
 def search_output_bias(env: Any, actor: torch.nn.Module, cfg: BiasSearchCfg) -> dict[str, Any]:
@@ -116,8 +115,7 @@ def search_output_bias(env: Any, actor: torch.nn.Module, cfg: BiasSearchCfg) -> 
 
     t0 = time.perf_counter()
     try:
-        best, value, evals = search_bias(mean_return, base.numel(), cfg.max_evals, cfg.bound)
-        before = mean_return(np.zeros(base.numel()))
+        best, value, before, evals = search_bias(mean_return, base.numel(), cfg.max_evals, cfg.bound)
     finally:
         with torch.no_grad():
             layer.bias.copy_(base)
