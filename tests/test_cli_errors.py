@@ -39,6 +39,8 @@ TRAIN_CASES = {
     "override of a missing key": ("reward.terms.path_length.wieght=2", "not in struct"),
     "not a number": ("iterations=abc", "iterations=abc"),
     "unknown group option": ("env=nope", "env/nope"),
+    "lr_decay under adaptive PPO": ("lr_decay.final=1e-5", "lr_decay needs agent.algorithm.schedule=fixed"),
+    "lr_decay start past the end": ("lr_decay={final:1e-5,start:1.0}", "lr_decay: final must be > 0 and start in"),
 }
 
 

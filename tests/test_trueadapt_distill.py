@@ -78,3 +78,40 @@ def test_recurrent_student_trains_loads_and_starts_each_batch_with_a_clear_memor
     again = run_trajectories(fresh, policy, batch)  # the memory left by the first batch is cleared: same results
     for k in first:
         assert torch.equal(first[k], again[k]), k
+
+
+def test_lr_decay_lowers_the_students_learning_rate_log_linearly(tiny_trueadapt, tmp_path):
+    from pathrl.train.runner import log_linear, train
+
+    run_dir = tmp_path / "decay"
+    cfg = _cfg("iiwa7_trueadapt_in_place_distill_f10_decay", tiny_trueadapt.path, run_dir, 5)
+    cfg["lr_decay"] = {"final": 1e-5, "start": 0.0}
+    train(cfg, run_dir)
+    rates = [m["values"]["Loss/learning_rate"] for t, _, m in read_messages(run_dir / "run.mcap")
+             if t == "/train/scalars"]
+    assert rates == pytest.approx([log_linear(it, 5, 1e-3, 1e-5, 0.0) for it in range(5)], rel=1e-9)
+    assert rates[0] == pytest.approx(1e-3) and rates[-1] == pytest.approx(1e-5)
+    saved = torch.load(run_dir / "model_4.pt", weights_only=True)
+    assert saved["optimizer_state_dict"]["param_groups"][0]["lr"] == pytest.approx(1e-5)
+
+
+#: The Table I state ablations trained by distillation: what each leaves out of (or adds to) the student's state.
+ABLATIONS = {"full": (), "no_position": ("pos",), "no_velocity": ("vel",), "no_acceleration": ("acc",),
+             "no_following": ("reference_1",), "f10": (), "open_loop": ()}
+
+
+@pytest.mark.parametrize("variant", sorted(ABLATIONS))
+def test_ablation_experiments_shape_the_students_state_and_keep_the_teacher(variant, tiny_trueadapt):
+    from pathrl.envs.registry import make_env
+    from pathrl.train.runner import check_run_cfg
+
+    cfg = _cfg(f"iiwa7_trueadapt_on_plate_distill_{variant}", tiny_trueadapt.path, Path("unused"), 1000)
+    check_run_cfg(cfg)
+    assert cfg["teacher"] == {"name": "trueadapt_tray"} and cfg["lr_decay"] == {"final": 1e-5, "start": 0.3}
+    parts = [name for name, _, _ in make_env(cfg, "train", num_envs=2).observation_layout()]
+    full = ["pos", "vel", "acc", "prev_ball", "ball", "reference_1"]
+    if variant == "f10":
+        assert parts == full + [f"reference_{k}" for k in range(2, 11)]
+    else:
+        assert parts == [p for p in full if p not in ABLATIONS[variant]]
+    assert cfg["task"]["observe"] is (variant != "open_loop")  # open loop: the teacher reads the frozen ball too

@@ -191,6 +191,16 @@ class StdAnnealCfg:
 
 
 @dataclass
+class LrDecayCfg:
+    """The learning rate falls log-linearly from ``agent.algorithm.learning_rate`` at ``start`` (fraction of the
+    iterations) to ``final`` at the last iteration; ``final: null`` (the default) leaves the rate to the algorithm.
+    PPO needs ``agent.algorithm.schedule: fixed`` with it (the adaptive schedule would overwrite it)."""
+
+    final: float | None = None  # learning rate at the last iteration (null: no decay)
+    start: float = 0.0  # fraction of ``iterations`` after which it starts to fall
+
+
+@dataclass
 class CriticWarmupCfg:
     """The first ``iterations`` iterations of a warm-started run train only the critic; the actor then starts at
     ``learning_rate`` (null: ``agent.algorithm.learning_rate``)."""
@@ -232,3 +242,4 @@ class TrainAppCfg:
     # before PPO, search the warm-started actor's output offsets on the training return ({episodes, max_evals,
     # bound, seed}; pathrl.train.bias_search); empty: none
     bias_search: dict[str, Any] = field(default_factory=dict)
+    lr_decay: LrDecayCfg = field(default_factory=LrDecayCfg)  # a falling learning rate (lr_decay.final=1e-5)

@@ -81,7 +81,7 @@ class AdaptRow:
 
 
 DISTILL = "iiwa7_trueadapt_on_plate_distill"
-DISTILL_IN_PLACE = "iiwa7_trueadapt_in_place_distill_f10"
+DISTILL_IN_PLACE = "iiwa7_trueadapt_in_place_distill_f10_decay"
 _STUDENT = "distilled policy"
 _STUDENT_F10 = "distilled policy, ten following positions in its state (the paper's: one)"
 _TRAY = "**tray controller: privileged information, not in the paper**"
@@ -240,9 +240,8 @@ CAPTION = (
     "steps. Limit violations: commanded 240 Hz setpoints outside the position, velocity, acceleration or jerk "
     "limits (checked, not assumed). *Distilled policy*: `models/iiwa7_trueadapt_on_plate_distill`, a network with "
     "the paper's state taught by the tray controller (DAgger), not trained with PPO as the paper's; in place "
-    "`models/iiwa7_trueadapt_in_place_distill_f10`, the same with ten following positions in the state (the "
-    "paper's ablation state; with one, the student reached 37-71 %), its checkpoint chosen on training "
-    "trajectories. *Tray "
+    "`models/iiwa7_trueadapt_in_place_distill_f10_decay`, the same with ten following positions in the state (the "
+    "paper's ablation state) and a falling learning rate, its last checkpoint. *Tray "
     "controller*: `models/iiwa7_trueadapt_<task>_tray_controller` (`pathrl/baselines/trueadapt_tray.py`), no "
     "learning; it reads privileged information a policy does not get (the whole reference with its velocities and "
     "accelerations, the plate kinematics, its own filter state), so it is a feasibility bound, not a result "

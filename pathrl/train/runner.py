@@ -39,7 +39,7 @@ from pathrl.storage import (
 
 __all__ = [
     "PathRLDistillationRunner", "PathRLRunner", "RESUME_MAY_CHANGE", "check_run_cfg", "config_change",
-    "float32_iteration", "resume_point", "rsl_train_cfg", "std_cap", "train",
+    "float32_iteration", "resume_point", "log_linear", "rsl_train_cfg", "train",
 ]
 
 
@@ -52,12 +52,12 @@ def rsl_train_cfg(cfg: dict[str, Any], resume_from: int | None = None) -> dict[s
     return agent
 
 
-def std_cap(it: int, total: int, init_std: float, final: float, start: float) -> float:
-    """Upper bound on the action std at iteration `it` of `total`: `init_std` until `start * total`, then
-    log-linear down to `final` at the last iteration."""
+def log_linear(it: int, total: int, initial: float, final: float, start: float) -> float:
+    """A schedule's value at iteration `it` of `total` (the action-noise cap, the learning rate): `initial` until
+    `start * total`, then log-linear down to `final` at the last iteration."""
     t0 = start * total
     frac = min(max((it - t0) / max(total - 1 - t0, 1.0), 0.0), 1.0)
-    return float(init_std * (final / init_std) ** frac)
+    return float(initial * (final / initial) ** frac)
 
 
 class PathRLRunner(OnPolicyRunner):
@@ -81,16 +81,39 @@ class PathRLRunner(OnPolicyRunner):
 
         self.alg.update = update_then_call
 
+    def before_each_update(self, fn: Callable[[int], None]) -> None:
+        """Call ``fn(it)`` right before the update of iteration `it` (so the logs of that iteration show its effect)."""
+        update, it = self.alg.update, [self.current_learning_iteration]
+
+        def call_then_update() -> dict[str, float]:
+            fn(it[0])
+            it[0] += 1
+            return update()
+
+        self.alg.update = call_then_update
+
     def set_std_schedule(self, total: int, init_std: float, final: float, start: float) -> None:
         """Cap the std before every rollout (the cap depends only on the iteration, so resume reproduces it)."""
         dist = self.alg.get_policy().distribution
 
         def apply(it: int) -> None:
-            dist.std_range[1] = max(std_cap(it, total, init_std, final, start), dist.std_range[0])
+            dist.std_range[1] = max(log_linear(it, total, init_std, final, start), dist.std_range[0])
             dist.log_std_range[1] = math.log(dist.std_range[1])
 
         apply(self.current_learning_iteration)
         self.after_each_update(apply)
+
+    def set_lr_decay(self, total: int, final: float, start: float) -> None:
+        """Set the learning rate of every update from :func:`log_linear` (from the configured rate to `final`; it
+        depends only on the iteration, so a resume reproduces it). PPO or Distillation alike."""
+        alg, lr0 = self.alg, float(self.alg.learning_rate)
+
+        def apply(it: int) -> None:
+            alg.learning_rate = log_linear(it, total, lr0, final, start)
+            for group in alg.optimizer.param_groups:
+                group["lr"] = alg.learning_rate
+
+        self.before_each_update(apply)
 
     def set_float32_from(self, iteration: int) -> None:
         """From iteration `iteration` on (counted from 0, so a resume continues the count) the hidden layers of a
@@ -237,6 +260,7 @@ def check_run_cfg(cfg: dict[str, Any]) -> None:
             raise ValueError(f"agent.{key} must be >= 1, got {cfg['agent'][key]}")
     if cfg.get("float32_from") is not None:
         float32_iteration(cfg["float32_from"], int(cfg["iterations"]))
+    _check_lr_decay(cfg)
     LimitBackend.from_run(cfg)  # native_limits, compile_limits: true or false
 
 
@@ -281,16 +305,8 @@ def train(cfg: dict[str, Any], run_dir: Path, resume: bool = False) -> dict[str,
         zero_last_layer(runner.alg.get_policy())  # the untrained residual policy is its controller
     if ckpt is None and cfg.get("bias_search"):
         prev = _bias_search(cfg, runner.alg.get_policy(), env.knot_gap, run_dir / "summary.json")
-    warmup = cfg.get("critic_warmup") or {}
-    if int(warmup.get("iterations") or 0) > 0:
-        lr = warmup.get("learning_rate")
-        runner.set_critic_warmup(int(warmup["iterations"]), None if lr is None else float(lr))
     total = int(cfg["iterations"])
-    anneal = cfg.get("std_anneal")
-    if anneal:
-        runner.set_std_schedule(total, _init_std(cfg), float(anneal["final"]), float(anneal["start"]))
-    if cfg.get("float32_from") is not None:
-        runner.set_float32_from(float32_iteration(cfg["float32_from"], total))
+    _schedules(runner, cfg, total)
     remaining = max(total - done_before, 0)
     runner.track_wall_time(run_dir / "summary.json", float(prev.get("wall_time_s", 0.0)))
     if loaded is not None and not runner.restore_streams(loaded):
@@ -321,6 +337,22 @@ def train(cfg: dict[str, Any], run_dir: Path, resume: bool = False) -> dict[str,
     return summary
 
 
+def _schedules(runner: PathRLRunner, cfg: dict[str, Any], total: int) -> None:
+    """The per-iteration schedules of a run: critic warm-up, action-noise cap, learning rate, float32 switch."""
+    warmup = cfg.get("critic_warmup") or {}
+    if int(warmup.get("iterations") or 0) > 0:
+        lr = warmup.get("learning_rate")
+        runner.set_critic_warmup(int(warmup["iterations"]), None if lr is None else float(lr))
+    anneal = cfg.get("std_anneal")
+    if anneal:
+        runner.set_std_schedule(total, _init_std(cfg), float(anneal["final"]), float(anneal["start"]))
+    decay = cfg.get("lr_decay") or {}
+    if decay.get("final") is not None:
+        runner.set_lr_decay(total, float(decay["final"]), float(decay["start"]))
+    if cfg.get("float32_from") is not None:
+        runner.set_float32_from(float32_iteration(cfg["float32_from"], total))
+
+
 def _resume_checkpoint(run_dir: Path, cfg: dict[str, Any], resume: bool) -> Path | None:
     """The checkpoint a run resumes from (None: a new run, the leftovers of a killed start cleaned); refuses to
     overwrite checkpoints without `resume` and to resume under another config."""
@@ -334,6 +366,17 @@ def _resume_checkpoint(run_dir: Path, cfg: dict[str, Any], resume: bool) -> Path
         if diff:
             raise ValueError(f"resume with a different config ({diff}); use the same overrides or a new run_dir")
     return ckpt
+
+
+def _check_lr_decay(cfg: dict[str, Any]) -> None:
+    """ValueError for an `lr_decay` that would not act as written (bad values; PPO's adaptive schedule)."""
+    decay = cfg.get("lr_decay") or {}
+    if decay.get("final") is None:
+        return
+    if not float(decay["final"]) > 0 or not 0 <= float(decay["start"]) < 1:
+        raise ValueError(f"lr_decay: final must be > 0 and start in [0, 1), got {decay}")
+    if cfg["agent"]["algorithm"].get("schedule", "fixed") != "fixed":
+        raise ValueError("lr_decay needs agent.algorithm.schedule=fixed (the adaptive schedule sets the rate itself)")
 
 
 def float32_iteration(fraction: Any, total: int) -> int:
