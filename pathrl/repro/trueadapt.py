@@ -80,10 +80,17 @@ class AdaptRow:
     in_paper: bool = True
 
 
-DISTILL = "iiwa7_trueadapt_on_plate_distill"
+DISTILL = "iiwa7_trueadapt_on_plate_distill_full"
 DISTILL_IN_PLACE = "iiwa7_trueadapt_in_place_distill_f10_decay"
 _STUDENT = "distilled policy"
 _STUDENT_F10 = "distilled policy, ten following positions in its state (the paper's: one)"
+
+
+def _ablation(variant: str) -> str:
+    """The model of a state ablation: the on-plate student's recipe (DISTILL) with its state changed."""
+    return f"iiwa7_trueadapt_on_plate_distill_{variant}"
+
+
 _TRAY = "**tray controller: privileged information, not in the paper**"
 
 ROWS: tuple[AdaptRow, ...] = (
@@ -95,7 +102,9 @@ ROWS: tuple[AdaptRow, ...] = (
     AdaptRow("on_plate/open_loop_evaluation", "on plate: open loop, evaluation only",
              _STUDENT + ", ball measurement frozen", AdaptEval("on_plate", DISTILL, open_loop=True)),
     AdaptRow("on_plate/open_loop_training", "on plate: open loop, training and evaluation", "not trained"),
-    AdaptRow("on_plate/no_current_position", "on plate: state without current position", "not trained"),
+    AdaptRow("on_plate/no_current_position", "on plate: state without current position",
+             _STUDENT + " without the commanded position in its state",
+             AdaptEval("on_plate", _ablation("no_position"))),
     AdaptRow("on_plate/no_current_velocity", "on plate: state without current velocity", "not trained"),
     AdaptRow("on_plate/no_current_acceleration", "on plate: state without current acceleration", "not trained"),
     AdaptRow("on_plate/no_following_positions", "on plate: state without following positions", "not trained"),
@@ -238,14 +247,18 @@ CAPTION = (
     "(`tools/trueadapt_eval.py`). Error distance: mean distance of the ball from its start, the in-place metric; "
     "on plate ours is shown in brackets. Acceleration and jerk: mean normalised |a| and |jerk| over joints and "
     "steps. Limit violations: commanded 240 Hz setpoints outside the position, velocity, acceleration or jerk "
-    "limits (checked, not assumed). *Distilled policy*: `models/iiwa7_trueadapt_on_plate_distill`, a network with "
-    "the paper's state taught by the tray controller (DAgger), not trained with PPO as the paper's; in place "
+    "limits (checked, not assumed). *Distilled policy*: `models/iiwa7_trueadapt_on_plate_distill_full`, a network "
+    "with the paper's state taught by the tray controller (DAgger, a falling learning rate, its last checkpoint), not "
+    "trained with PPO as the paper's; in place "
     "`models/iiwa7_trueadapt_in_place_distill_f10_decay`, the same with ten following positions in the state (the "
     "paper's ablation state) and a falling learning rate, its last checkpoint. *Tray "
     "controller*: `models/iiwa7_trueadapt_<task>_tray_controller` (`pathrl/baselines/trueadapt_tray.py`), no "
     "learning; it reads privileged information a policy does not get (the whole reference with its velocities and "
     "accelerations, the plate kinematics, its own filter state), so it is a feasibility bound, not a result "
-    "comparable with the paper's. Rows without a trained policy of ours show a dash.")
+    "comparable with the paper's. *State ablations* (`models/iiwa7_trueadapt_on_plate_distill_<variant>`): the "
+    "on-plate student's recipe with one part of its state left out; the teacher is the same controller, so these rows "
+    "measure what the network needs in order to copy it, not what PPO needs to learn the task. Rows without a "
+    "trained policy of ours show a dash.")
 
 
 def markdown(results: dict[str, Any]) -> tuple[list[str], list[list[str]]]:
