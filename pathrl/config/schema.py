@@ -17,8 +17,8 @@ from pathrl.envs.tracking_cfg import EnvSettings
 
 __all__ = [
     "CriticWarmupCfg", "DatasetAppCfg", "DatasetCfg", "EvalAppCfg", "EvalDatasetCfg", "ExportAppCfg",
-    "ExportDatasetCfg", "KnotsCfg", "RewardCfg", "RobotCfg", "StdAnnealCfg", "TaskCfg", "TcpCfg", "ToppraAppCfg",
-    "TrainAppCfg", "WorkspaceCfg",
+    "ExportDatasetCfg", "KnotsCfg", "LrDecayCfg", "RewardCfg", "RobotCfg", "StdAnnealCfg", "TaskCfg", "TcpCfg",
+    "ToppraAppCfg", "TrainAppCfg", "WorkspaceCfg",
 ]
 
 
