@@ -86,9 +86,11 @@ _STUDENT = "distilled policy"
 _STUDENT_F10 = "distilled policy, ten following positions in its state (the paper's: one)"
 
 
-def _ablation(variant: str) -> str:
-    """The model of a state ablation: the on-plate student's recipe (DISTILL) with its state changed."""
-    return f"iiwa7_trueadapt_on_plate_distill_{variant}"
+def _ablation_row(key: str, part: str, variant: str, left_out: str) -> AdaptRow:
+    """The on-plate row "state without <part>": the on-plate student's recipe (DISTILL) without `left_out` in its
+    state, ``models/iiwa7_trueadapt_on_plate_distill_<variant>``."""
+    return AdaptRow(f"on_plate/{key}", f"on plate: state without {part}", f"{_STUDENT} without {left_out} in its state",
+                    AdaptEval("on_plate", f"iiwa7_trueadapt_on_plate_distill_{variant}"))
 
 
 _TRAY = "**tray controller: privileged information, not in the paper**"
@@ -102,18 +104,10 @@ ROWS: tuple[AdaptRow, ...] = (
     AdaptRow("on_plate/open_loop_evaluation", "on plate: open loop, evaluation only",
              _STUDENT + ", ball measurement frozen", AdaptEval("on_plate", DISTILL, open_loop=True)),
     AdaptRow("on_plate/open_loop_training", "on plate: open loop, training and evaluation", "not trained"),
-    AdaptRow("on_plate/no_current_position", "on plate: state without current position",
-             _STUDENT + " without the commanded position in its state",
-             AdaptEval("on_plate", _ablation("no_position"))),
-    AdaptRow("on_plate/no_current_velocity", "on plate: state without current velocity",
-             _STUDENT + " without the commanded velocity in its state",
-             AdaptEval("on_plate", _ablation("no_velocity"))),
-    AdaptRow("on_plate/no_current_acceleration", "on plate: state without current acceleration",
-             _STUDENT + " without the commanded acceleration in its state",
-             AdaptEval("on_plate", _ablation("no_acceleration"))),
-    AdaptRow("on_plate/no_following_positions", "on plate: state without following positions",
-             _STUDENT + " without the next reference position in its state",
-             AdaptEval("on_plate", _ablation("no_following"))),
+    _ablation_row("no_current_position", "current position", "no_position", "the commanded position"),
+    _ablation_row("no_current_velocity", "current velocity", "no_velocity", "the commanded velocity"),
+    _ablation_row("no_current_acceleration", "current acceleration", "no_acceleration", "the commanded acceleration"),
+    _ablation_row("no_following_positions", "following positions", "no_following", "the next reference position"),
     AdaptRow("on_plate/ten_following_positions", "on plate: state with ten following positions", "not trained"),
     AdaptRow("on_plate/no_jerk_penalty", "on plate: no jerk penalty", "not trained"),
     AdaptRow("on_plate/no_acceleration_penalty", "on plate: no acceleration penalty", "not trained"),
