@@ -237,3 +237,25 @@ def test_controller_with_the_path_law_keeps_every_limit_and_most_balls(iiwa):
                for r in recs) == 0
     assert sum(r.extra["task"]["ball_on_plate"] < 0.5 for r in recs) <= 2
     assert sum(r.finish_step >= 0 for r in recs) >= 19
+
+
+def test_an_episode_that_timed_out_did_not_reach_the_end_afterwards(iiwa):
+    """A batch keeps stepping every env until its last episode ends; an episode cut off by its budget must not be
+    credited with reaching the end in a later step of its env (that once put the end of path after the episode)."""
+    paths = load_pathset(DATASET, "test", KnotStrategy("distance", 0.3, 0.1, 5), iiwa)
+    cfg = TrackingEnvCfg(num_envs=8, seed=0, segments="full", episode_budget_s=6.0, scale_budget=False, n_state=5,
+                         end_obs=True, end_tolerance=0.05, autoreset=False, fail_terminates=False)
+    env = PathTrackingEnv(cfg, iiwa, paths, build_reward_terms(REWARD), AnalyticBall(iiwa, 8, seed=0))
+    ctl = TrayController(env)
+    plan = full_segments(env.paths, torch.arange(8))
+    long_budget = env.start_segments
+    def start_with_short_budgets(env_ids, seg):  # half of the episodes get 1.5 s, too short to finish
+        long_budget(env_ids, seg)
+        env.budget[env_ids[::2]] = 15
+    env.start_segments = start_with_short_budgets
+    recs = rollout(env, ctl, plan)
+    cut = [r for r in recs if r.termination == "time_out"]
+    assert len(cut) == 4 and all(r.steps == 15 for r in cut)
+    assert int(env.finish_step[0]) > 15  # the env of a cut episode did get to the end later in the batch
+    assert all(not r.reached_end and r.finish_step == -1 for r in cut)
+    assert all(r.reached_end and 0 <= r.finish_step <= r.steps for r in recs if r.termination != "time_out")

@@ -109,6 +109,8 @@ def _rollout_batch(env: PathTrackingEnv, policy: Policy, plan: Segments, ids: Te
     out = []
     for i in range(k):
         steps = int(done_step[i]) if int(done_step[i]) > 0 else pos.shape[1] - 1
+        # the env kept stepping until the batch's last episode ended: an end reached after this one ended is not its
+        finish = int(env.finish_step[i]) if int(env.finish_step[i]) <= steps else -1
         p, v, a = pos[i, : steps + 1], vel[i, : steps + 1], acc[i, : steps + 1]
         task_series = {key: torch.stack([s[key][i] for s in series[:steps]]).cpu()
                        for key in (series[0] if series else {})}
@@ -120,8 +122,8 @@ def _rollout_batch(env: PathTrackingEnv, policy: Policy, plan: Segments, ids: Te
             end_s=float(seg.end_s[i]),
             steps=steps,
             termination=term[i],
-            reached_end=bool(env.finish_step[i] >= 0),
-            finish_step=int(env.finish_step[i]),
+            reached_end=finish >= 0,
+            finish_step=finish,
             pos=p.cpu(), vel=v.cpu(), acc=a.cpu(),
             setpoints=torch.cat([p[:1], sp.reshape(-1, p.shape[1])]).cpu(),
             setpoint_vel=torch.cat([v[:1], sv.reshape(-1, p.shape[1])]).cpu(),
