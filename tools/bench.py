@@ -316,6 +316,11 @@ def main() -> None:
     for model, dataset in (("models/iiwa7_random", "datasets/iiwa7/random"),
                            ("models/armar6_random", "datasets/armar6/random")):
         res[f"follower_{Path(model).name}"] = bench_follower(model, dataset, 100 if quick else 400)
+    from pathrl.eval.trueadapt_realtime import measure as adapt_decision  # TrueAdapt: policy + valid range, 50 ms
+
+    res["trueadapt_decision"] = adapt_decision(ROOT / "models" / "iiwa7_trueadapt_on_plate_distill_full",
+                                               str(ROOT / "datasets" / "iiwa7" / "trueadapt_on_plate"),
+                                               100 if quick else 2000)
     main_key = f"env_iiwa7{suffix[modes[0]]}"
     res["reference_iiwa7"] = bench_reference("iiwa7", sec)
     ref_rate = res["reference_iiwa7"]["env_steps_per_s"]
@@ -389,6 +394,10 @@ def _print(res: dict, out: Path) -> None:
         d = res[k]
         t.add_row(f"pathrl.deploy.Follower.decide, {d['model']}, 1 thread",
                   f"{d['mean_ms']:.2f} ms mean (p99 {d['p99_ms']:.2f}, max {d['max_ms']:.2f})")
+    d = res["trueadapt_decision"]
+    t.add_row(f"TrueAdapt decision (policy + valid range + setpoints), {Path(d['model']).name}, 1 thread",
+              f"{d['decision_ms_mean']:.2f} ms mean (max {d['decision_ms_max']:.2f}; valid range max "
+              f"{d['valid_range_ms_max']:.2f})")
     for k in ("physics_ball_on_plate", "physics_armar4_standing"):
         d = res[k]
         t.add_row(f"PyBullet {d['scene']} (one client)", f"{d['physics_steps_per_s']:,.0f} physics steps/s "

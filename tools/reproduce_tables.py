@@ -188,6 +188,8 @@ def build_plan(args: argparse.Namespace, profile: Profile, lay: Layout) -> Plan:
         n = 1000 if profile.name == "quick" else 100_000
         plan.add("evaluate", "TrueAdapt limit validation", lambda: run_script(adapt.validation_command(
             ROOT, lay.out / "raw", n, args.reuse), logs / f"{adapt.VALIDATION_ID}.log"))
+        plan.add("timing", "TrueAdapt time per decision", lambda: run_script(adapt.realtime_command(
+            ROOT, lay.out / "raw", lay.models, lay.test_data, 2000, args.reuse), logs / f"{adapt.REALTIME_ID}.log"))
     if only is None:
         for key, robot, split in REALTIME:
             plan.add("timing", f"real time {key}", lambda key=key, robot=robot, split=split: realtime(

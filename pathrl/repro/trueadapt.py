@@ -3,7 +3,8 @@
 Each row is a setting of the paper; ``AdaptEval`` says which shipped policy (or the reference without adaptation, or
 a model-based controller) fills our cells, on which split and ball. An evaluation runs ``tools/trueadapt_eval.py``
 and writes ``results/raw/<id>/metrics.json``; the 10^5-trajectory limit validation (Sec. VI-D) runs
-``tools/trueadapt_validation.py`` into ``results/raw/trueadapt_validation.json``. The paper's values are
+``tools/trueadapt_validation.py`` into ``results/raw/trueadapt_validation.json``; the time per decision
+(``pathrl.eval.trueadapt_realtime``) goes into ``results/raw/trueadapt_realtime.json``. The paper's values are
 ``trueadapt_paper.yaml`` next to this file. Rendering is a pure function of those results.
 """
 
@@ -18,8 +19,9 @@ from typing import Any
 import yaml
 
 __all__ = [
-    "AdaptEval", "AdaptRow", "COLUMNS", "EPISODES", "ROWS", "TRAIN_MISSING", "VALIDATION_ID", "collect", "eval_command",
-    "evaluations", "latex", "markdown", "names", "ours", "paper", "unavailable", "validation_command",
+    "AdaptEval", "AdaptRow", "COLUMNS", "EPISODES", "REALTIME_ID", "ROWS", "TRAIN_MISSING", "VALIDATION_ID", "collect",
+    "eval_command", "evaluations", "latex", "markdown", "names", "ours", "paper", "realtime_command", "unavailable",
+    "validation_command",
 ]
 
 ADAPT_TABLE = "trueadapt_table_I"
@@ -33,6 +35,9 @@ HEADERS = ("success rate (%)", "trajectory fraction (%)", "error distance (cm)",
            "mean norm. \\|jerk\\| (%)")
 VALIDATION_ID = "trueadapt_validation"
 VALIDATION_STEPS = 100  # decision steps (5 s) per validation trajectory
+REALTIME_ID = "trueadapt_realtime"
+#: The policy and test split timed per decision (the on-plate row's).
+REALTIME_MODEL, REALTIME_DATA = "iiwa7_trueadapt_on_plate_distill_full", "trueadapt_on_plate"
 #: Evaluated trajectories: the committed test split's 1000 (the first 1000 of the train split for that row).
 EPISODES = 1000
 TRAIN_MISSING = ("not available: needs the uncommitted train split data/iiwa7/trueadapt_on_plate "
@@ -177,6 +182,21 @@ def validation_command(root: Path, raw: Path, trajectories: int, reuse: bool = F
             str(VALIDATION_STEPS), "--out", shown]
 
 
+def realtime_command(root: Path, raw: Path, models: Path, data: Path, decisions: int,
+                     reuse: bool = False) -> list[str] | None:
+    """Module and arguments (run in `root`) of the time per decision into `raw`/trueadapt_realtime.json, or None
+    (`reuse` and the result exists, or the timed model is not shipped)."""
+    out = raw / f"{REALTIME_ID}.json"
+    if (reuse and out.is_file()) or not (models / REALTIME_MODEL / "config.yaml").is_file():
+        return None
+
+    def rel(p: Path) -> str:
+        return str(p.relative_to(root)) if p.is_relative_to(root) else str(p)
+
+    return ["-m", "pathrl.eval.trueadapt_realtime", rel(models / REALTIME_MODEL), rel(out), "--dataset",
+            rel(data / ROBOT / REALTIME_DATA), "--decisions", str(decisions)]
+
+
 def unavailable(e: AdaptEval, models: Path, data: Path) -> str | None:
     """Why `e` is not evaluated here (its model is not shipped, or it needs the uncommitted train split and
     `data` lacks it), or None. A missing committed test split is no reason: the evaluation fails loudly."""
@@ -188,9 +208,11 @@ def unavailable(e: AdaptEval, models: Path, data: Path) -> str | None:
 
 
 def collect(raw: Path, models: Path) -> dict[str, Any]:
-    """{"trueadapt": {id: metrics.json}, "trueadapt_validation": its JSON or None, "trueadapt_training":
-    {model: summary.json}} of the results in `raw` (a result of a model no longer shipped is left out)."""
-    out: dict[str, Any] = {"trueadapt": {}, "trueadapt_validation": None, "trueadapt_training": {}}
+    """{"trueadapt": {id: metrics.json}, "trueadapt_validation" and "trueadapt_realtime": their JSON or None,
+    "trueadapt_training": {model: summary.json}} of the results in `raw` (a result of a model no longer shipped is
+    left out)."""
+    out: dict[str, Any] = {"trueadapt": {}, "trueadapt_validation": None, "trueadapt_realtime": None,
+                           "trueadapt_training": {}}
     for e in evaluations():
         p = raw / e.id / "metrics.json"
         if p.is_file() and (e.model is None or (models / e.model).is_dir()):
@@ -198,9 +220,9 @@ def collect(raw: Path, models: Path) -> dict[str, Any]:
         s = models / (e.model or "-") / "summary.json"
         if e.model and s.is_file():
             out["trueadapt_training"][e.model] = json.loads(s.read_text())
-    v = raw / f"{VALIDATION_ID}.json"
-    if v.is_file():
-        out["trueadapt_validation"] = json.loads(v.read_text())
+    for key in (VALIDATION_ID, REALTIME_ID):
+        if (raw / f"{key}.json").is_file():
+            out[key] = json.loads((raw / f"{key}.json").read_text())
     return out
 
 
@@ -242,6 +264,17 @@ def _validation_line(v: list[dict[str, Any]] | None) -> str:
             f"{VALIDATION_STEPS}`; accelerations drawn from the valid range, or its maximum, every 50 ms step, "
             "checked at 240 Hz against position, velocity, acceleration and jerk limits; one thread): "
             + "; ".join(parts) + ".")
+
+
+def _realtime_line(r: dict[str, Any] | None) -> str:
+    if not r:
+        return "Time per decision: not measured."
+    return (f"Time per decision (`python -m pathrl.eval.trueadapt_realtime`; `{r['model']}`, one env, one thread, "
+            f"CPU time of the policy, the clipping into the valid range, the setpoints, the valid range and the "
+            f"observation of the next decision; {r['decisions']} decisions, limits {r['limits']}): "
+            f"**{r['decision_ms_mean']:.2f} ms** mean, {r['decision_ms_max']:.2f} ms max "
+            f"({r['max_pct_of_cycle']:.1f} % of the {r['cycle_ms']:.0f} ms cycle); the valid range alone at most "
+            f"**{r['valid_range_ms_max']:.2f} ms** (paper: at most 0.9 ms on an Intel i9-9900K).")
 
 
 CAPTION = (
@@ -289,7 +322,10 @@ def markdown(results: dict[str, Any]) -> tuple[list[str], list[list[str]]]:
         if m is not None:
             csv_rows.append([ADAPT_TABLE, row.key, "limit_violations", str(m.get("limit_violations", "")), ""])
     v = results.get("trueadapt_validation")
-    lines += ["", _validation_line(v)]
+    rt = results.get(REALTIME_ID)
+    lines += ["", _validation_line(v), "", _realtime_line(rt)]
+    if rt:
+        csv_rows.append([ADAPT_TABLE, "realtime", "valid_range_ms_max", f"{rt['valid_range_ms_max']:.6g}", "0.9"])
     for r in v or []:
         csv_rows.append([ADAPT_TABLE, f"validation/{r['mode']}", "limit_violations", str(r["violations"]["total"]),
                          "0"])
