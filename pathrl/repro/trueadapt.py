@@ -129,7 +129,9 @@ ROWS: tuple[AdaptRow, ...] = (
     AdaptRow("in_place/real_robot", "in place: TrueAdapt, real robot", "no real robot"),
     AdaptRow("in_place/open_loop_evaluation", "in place: open loop, evaluation only",
              _STUDENT_F10 + ", ball measurement frozen", AdaptEval("in_place", DISTILL_IN_PLACE, open_loop=True)),
-    AdaptRow("in_place/open_loop_training", "in place: open loop, training and evaluation", "not trained"),
+    AdaptRow("in_place/open_loop_training", "in place: open loop, training and evaluation",
+             _STUDENT_F10 + " trained with the ball measurement frozen (teacher too), evaluated so",
+             AdaptEval("in_place", "iiwa7_trueadapt_in_place_distill_open_loop", open_loop=True)),
     AdaptRow("in_place/tray_controller", "in place: model-based tray controller", _TRAY,
              AdaptEval("in_place", "iiwa7_trueadapt_in_place_tray_controller"), in_paper=False),
 )
