@@ -317,9 +317,10 @@ def main() -> None:
                            ("models/armar6_random", "datasets/armar6/random")):
         res[f"follower_{Path(model).name}"] = bench_follower(model, dataset, 100 if quick else 400)
     from pathrl.eval.trueadapt_realtime import measure as adapt_decision  # TrueAdapt: policy + valid range, 50 ms
+    from pathrl.repro import trueadapt as adapt
 
-    res["trueadapt_decision"] = adapt_decision(ROOT / "models" / "iiwa7_trueadapt_on_plate_distill_full",
-                                               str(ROOT / "datasets" / "iiwa7" / "trueadapt_on_plate"),
+    res["trueadapt_decision"] = adapt_decision(ROOT / "models" / adapt.REALTIME_MODEL,
+                                               str(ROOT / "datasets" / adapt.ROBOT / adapt.REALTIME_DATA),
                                                100 if quick else 2000)
     main_key = f"env_iiwa7{suffix[modes[0]]}"
     res["reference_iiwa7"] = bench_reference("iiwa7", sec)

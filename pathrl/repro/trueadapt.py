@@ -154,6 +154,11 @@ def paper() -> dict[str, Any]:
     return yaml.safe_load(PAPER_FILE.read_text())[ADAPT_TABLE]
 
 
+def _rel(p: Path, root: Path) -> str:
+    """`p` relative to `root` when inside it (commands run in `root`), else as given."""
+    return str(p.relative_to(root)) if p.is_relative_to(root) else str(p)
+
+
 def eval_command(e: AdaptEval, root: Path, raw: Path, episodes: int, reuse: bool = False) -> list[str] | None:
     """Script and arguments (run with the project's Python in `root`) that evaluate `e` into
     `raw`/<id>/metrics.json, or None when it is skipped: its model is not shipped, the train split it needs is not
@@ -163,13 +168,10 @@ def eval_command(e: AdaptEval, root: Path, raw: Path, episodes: int, reuse: bool
     data = root / ("datasets" if e.split == "test" else "data")
     if unavailable(e, root / "models", data) is not None or (reuse and (out / "metrics.json").is_file()):
         return None
-
-    def rel(p: Path) -> str:
-        return str(p.relative_to(root)) if p.is_relative_to(root) else str(p)
-
-    run = ["--run", rel(root / "models" / e.model)] if e.model else ["--task", e.task]
-    return ["tools/trueadapt_eval.py", *run, "--dataset", rel(data / ROBOT / e.dataset), "--split", e.split,
-            "--episodes", str(episodes), "--seed", "0", "--backend", e.backend, "--workers", "1", "--out", rel(out),
+    run = ["--run", _rel(root / "models" / e.model, root)] if e.model else ["--task", e.task]
+    return ["tools/trueadapt_eval.py", *run, "--dataset", _rel(data / ROBOT / e.dataset, root), "--split", e.split,
+            "--episodes", str(episodes), "--seed", "0", "--backend", e.backend, "--workers", "1", "--out",
+            _rel(out, root),
             *(["--open-loop"] if e.open_loop else [])]
 
 
@@ -179,9 +181,8 @@ def validation_command(root: Path, raw: Path, trajectories: int, reuse: bool = F
     out = raw / f"{VALIDATION_ID}.json"
     if reuse and out.is_file():
         return None
-    shown = str(out.relative_to(root)) if out.is_relative_to(root) else str(out)
     return ["tools/trueadapt_validation.py", "--trajectories", str(trajectories), "--steps",
-            str(VALIDATION_STEPS), "--out", shown]
+            str(VALIDATION_STEPS), "--out", _rel(out, root)]
 
 
 def realtime_command(root: Path, raw: Path, models: Path, data: Path, decisions: int,
@@ -191,12 +192,8 @@ def realtime_command(root: Path, raw: Path, models: Path, data: Path, decisions:
     out = raw / f"{REALTIME_ID}.json"
     if (reuse and out.is_file()) or not (models / REALTIME_MODEL / "config.yaml").is_file():
         return None
-
-    def rel(p: Path) -> str:
-        return str(p.relative_to(root)) if p.is_relative_to(root) else str(p)
-
-    return ["-m", "pathrl.eval.trueadapt_realtime", rel(models / REALTIME_MODEL), rel(out), "--dataset",
-            rel(data / ROBOT / REALTIME_DATA), "--decisions", str(decisions)]
+    return ["-m", "pathrl.eval.trueadapt_realtime", _rel(models / REALTIME_MODEL, root), _rel(out, root), "--dataset",
+            _rel(data / ROBOT / REALTIME_DATA, root), "--decisions", str(decisions)]
 
 
 def unavailable(e: AdaptEval, models: Path, data: Path) -> str | None:
