@@ -21,8 +21,11 @@ $(STAMP): pyproject.toml
 	$(PY) -m pip install -q --no-deps torchrl==0.14.1 hoptorch==0.1.4
 	touch $(STAMP)
 
+# Two pytest workers, one per core of the reference machine (most tests run one single-threaded training or
+# evaluation); TEST_WORKERS=0 runs in one process.
+TEST_WORKERS ?= 2
 test: setup
-	$(PY) -m pytest
+	$(PY) -m pytest -n $(TEST_WORKERS) --dist worksteal
 
 lint: setup
 	$(VENV)/bin/ruff check pathrl tests tools

@@ -68,14 +68,18 @@ def test_distillation_run_then_ppo_from_the_student_with_a_frozen_actor(tiny_dat
     assert "student_state_dict" in ck and ck["infos"]["wall_time_s"] > 0
 
     ppo = tmp_path / "ppo"
-    frozen = ("+experiment=iiwa7_ball_balancing_finetune", f"init_from={student}", "critic_warmup.iterations=2")
+    frozen = ("+experiment=iiwa7_ball_balancing_finetune", f"init_from={student}", "critic_warmup.iterations=2",
+              "critic_warmup.freeze_normalizer=true")
     r = run(train_cmd(tiny_dataset, ppo, 3, *frozen))
     assert r.returncode == 0, r.stderr[-2000:]
     s = ck["student_state_dict"]
+    norm = [k for k in s if k.startswith("obs_normalizer.")]
+    assert norm
     for it, same in ((0, True), (1, True), (2, False)):  # checkpoints are taken after each iteration's update
         actor = torch.load(ppo / f"model_{it}.pt", weights_only=True)["actor_state_dict"]
         assert actor.keys() == s.keys()
         assert all(torch.equal(actor[k], s[k]) for k in s) is same, it
+        assert all(torch.equal(actor[k], s[k]) for k in norm), it  # freeze_normalizer: the inputs never move
     critic0 = torch.load(ppo / "model_0.pt", weights_only=True)["critic_state_dict"]
     critic1 = torch.load(ppo / "model_1.pt", weights_only=True)["critic_state_dict"]
     assert not torch.equal(critic0["mlp.0.weight"], critic1["mlp.0.weight"])  # the critic learns meanwhile

@@ -73,7 +73,7 @@ def test_migrate_fills_a_version_0_config_with_the_old_behaviour():
     old = {"env": {"num_envs": 8, "tcp_obs_error": 0.2}, "knots": {"n_state": 5}, "seed": 3}
     new = migrate(old)
     assert old == {"env": {"num_envs": 8, "tcp_obs_error": 0.2}, "knots": {"n_state": 5}, "seed": 3}  # a copy
-    assert new["config_version"] == CONFIG_VERSION == 3
+    assert new["config_version"] == CONFIG_VERSION == 4
     assert new["task"] == {**NO_TASK, "adapt": {}}
     assert new["env"] == {"num_envs": 8, "tcp_obs_error": 0.2, "knot_obs": "relative", "end_obs": False,
                           "end_tolerance": None, "free_joint_actions": "linear", "posture_omega": 3.0,
@@ -81,7 +81,7 @@ def test_migrate_fills_a_version_0_config_with_the_old_behaviour():
                           "error_obs": False, "error_obs_scale": 0.1}
     assert "dataset" not in new  # groups the config lacks are not invented
     assert (new["init_from"], new["teacher"], new["residual"]) == (None, {}, {})
-    assert new["critic_warmup"] == {"iterations": 0, "learning_rate": None}
+    assert new["critic_warmup"] == {"iterations": 0, "learning_rate": None, "freeze_normalizer": False}  # v4 too
     assert new["lr_decay"] == {"final": None, "start": 0.0}  # version 3: a constant (or adaptive) learning rate
     assert migrate(new) == new
     env = TrackingEnvCfg.from_run(old, seed=None)
@@ -89,12 +89,19 @@ def test_migrate_fills_a_version_0_config_with_the_old_behaviour():
                                                                                                 5, 3)
 
 
+def test_migrate_fills_a_version_3_config_with_a_normaliser_that_keeps_learning():
+    v3 = {"config_version": 3, "critic_warmup": {"iterations": 10, "learning_rate": 1e-5}}
+    new = migrate(v3)
+    assert new["critic_warmup"] == {"iterations": 10, "learning_rate": 1e-5, "freeze_normalizer": False}
+    assert new["config_version"] == 4 and "lr_decay" not in new  # the version 2 -> 3 key is not filled again
+
+
 def test_migrate_fills_a_version_1_config_without_the_error_observation():
     v1 = {"config_version": 1, "env": {"num_envs": 8, "tcp_obs": True}, "task": dict(NO_TASK), "knots": {"n_state": 5}}
     new = migrate(v1)
     assert new["env"] == {"num_envs": 8, "tcp_obs": True, "error_obs": False, "error_obs_scale": 0.1}
     assert new["task"] == NO_TASK and "init_from" not in new  # the version 0 keys are not filled again
-    assert new["lr_decay"] == {"final": None, "start": 0.0} and new["config_version"] == 3
+    assert new["lr_decay"] == {"final": None, "start": 0.0} and new["config_version"] == 4
     assert TrackingEnvCfg.from_run(new, seed=0).error_obs is False
 
 

@@ -42,13 +42,19 @@ def test_renderer_hand_checked_cells():
         "| in place: model-based tray controller | **tray controller: privileged information, not in the paper** | "
         "**100.0** | **100.0** | **1.0** | **3.8** | **3.0** | pybullet | 1000 | 2 |")
     # a paper row without a policy of ours: dashes and the paper's value
-    assert _line(md, "on plate: no jerk penalty") == (
-        "| on plate: no jerk penalty | not trained | – / 87.5 | – / 96.7 | – | – / 23.0 | – / 18.1 | – | – | – |")
+    assert _line(md, "in place: TrueAdapt, real robot") == (
+        "| in place: TrueAdapt, real robot | no real robot | – / 82.0 | – / 96.1 | – / 1.7 | – / 6.9 | – / 3.6 | – | – "
+        "| – |")
+    # a second policy of ours for one paper row: its own line and CSV key, the paper's values of that row beside it
+    ppo = next(ln for ln in md if ln.startswith("| on plate: TrueAdapt, test set | distilled policy + PPO"))
+    assert ppo.endswith("| – / 89.6 | – / 97.6 | – | – / 7.0 | – / 3.7 | – | – | – |")
+    assert (md.index(ppo) == md.index(_line(md, "on plate: TrueAdapt, test set")) + 1)
     assert any("random accelerations: 100000 trajectories x 100 steps, **0 violations** in 8.40e+08 (setpoint, joint) "
                "pairs (104 s)" in ln for ln in md)
     csv = {(r[1], r[2]): (r[3], r[4]) for r in rows}
     assert csv["on_plate/reference", "success_pct"] == ("5", "4.2")
     assert csv["in_place/test_set", "error_distance_cm"] == ("", "1.2")
+    assert csv["on_plate/test_set_ppo", "success_pct"] == ("", "89.6")
     assert csv["in_place/tray_controller", "limit_violations"] == ("2", "")
     assert csv["validation/random", "limit_violations"] == ("0", "0")
     tex = "\n".join(adapt.latex(FAKE))

@@ -181,6 +181,21 @@ def test_reset_and_step_contract():
     assert _env(n=2, obs_position=False, obs_velocity=False).num_obs == env.num_obs - 14
 
 
+def test_the_critic_group_holds_the_time_left_and_the_true_ball_and_leaves_the_policy_state_alone():
+    plain, env = _env(n=4, seed=5), _env(n=4, seed=5, critic_obs=True)
+    obs = env.get_observations()
+    assert "critic" not in plain.get_observations().keys() and obs["critic"].shape == (4, 5)
+    assert torch.allclose(obs["critic"][:, 0], torch.full((4,), 120 * 0.05 / 10.0))  # 120 steps of 50 ms left
+    for _ in range(3):
+        prev = env.ball.xy.clone()
+        op, *_ = plain.step(torch.full((4, 7), 0.2))
+        obs, *_ = env.step(torch.full((4, 7), 0.2))
+        assert torch.equal(op["policy"], obs["policy"])  # same episodes, same state: the group is only added
+    expected = torch.cat([torch.full((4, 1), 117 * 0.05 / 10.0, **T64), env.ball.xy / env.half,
+                          (env.ball.xy - prev) / 0.05], dim=1)
+    assert torch.allclose(obs["critic"].double(), expected, atol=1e-6)
+
+
 def test_same_seed_same_episodes_and_a_deviation_ends_the_episode():
     a, b = _env(seed=3), _env(seed=3)
     for _ in range(4):

@@ -14,10 +14,11 @@ import copy
 from collections.abc import Callable, Mapping
 from typing import Any
 
-__all__ = ["ADDED_IN_V2", "ADDED_IN_V3", "ADDED_KEYS", "CONFIG_VERSION", "NO_TASK", "config_version", "migrate"]
+__all__ = ["ADDED_IN_V2", "ADDED_IN_V3", "ADDED_IN_V4", "ADDED_KEYS", "CONFIG_VERSION", "NO_TASK", "config_version",
+           "migrate"]
 
 #: Version of the config layout written by this code.
-CONFIG_VERSION = 3
+CONFIG_VERSION = 4
 
 #: The task of configs saved before tasks existed (plain path tracking).
 NO_TASK: dict[str, Any] = {"name": "tracking", "feedback": None, "backend": "analytic", "workers": 2,
@@ -58,6 +59,11 @@ ADDED_IN_V3: dict[str, Any] = {
     "lr_decay": {"final": None, "start": 0.0},
 }
 
+#: Keys added in version 4.
+ADDED_IN_V4: dict[str, Any] = {
+    "critic_warmup.freeze_normalizer": False,
+}
+
 
 def config_version(cfg: Mapping[str, Any]) -> int:
     """The layout version of a config (0: saved before ``config_version`` existed); ValueError for a version this
@@ -85,6 +91,11 @@ def _v2_to_v3(cfg: dict[str, Any]) -> None:
     _fill(cfg, ADDED_IN_V3)
 
 
+def _v3_to_v4(cfg: dict[str, Any]) -> None:
+    """Version 3 -> 4: the keys of :data:`ADDED_IN_V4` (the actor's observation normaliser keeps learning)."""
+    _fill(cfg, ADDED_IN_V4)
+
+
 def _fill(cfg: dict[str, Any], added: Mapping[str, Any]) -> None:
     """Each ``group.key`` of `added` missing from `cfg` set to its value (when the group exists; top level always)."""
     for dotted, value in added.items():
@@ -95,7 +106,7 @@ def _fill(cfg: dict[str, Any], added: Mapping[str, Any]) -> None:
 
 
 #: Step ``k`` brings a version-``k`` config to version ``k + 1`` (in place).
-STEPS: tuple[Callable[[dict[str, Any]], None], ...] = (_v0_to_v1, _v1_to_v2, _v2_to_v3)
+STEPS: tuple[Callable[[dict[str, Any]], None], ...] = (_v0_to_v1, _v1_to_v2, _v2_to_v3, _v3_to_v4)
 
 
 def migrate(cfg: Mapping[str, Any]) -> dict[str, Any]:

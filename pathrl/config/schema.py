@@ -203,10 +203,12 @@ class LrDecayCfg:
 @dataclass
 class CriticWarmupCfg:
     """The first ``iterations`` iterations of a warm-started run train only the critic; the actor then starts at
-    ``learning_rate`` (null: ``agent.algorithm.learning_rate``)."""
+    ``learning_rate`` (null: ``agent.algorithm.learning_rate``). ``freeze_normalizer`` keeps the actor's
+    observation normaliser as loaded for the whole run (a fine-tune that should not move its inputs)."""
 
     iterations: int = 0
     learning_rate: float | None = None
+    freeze_normalizer: bool = False
 
 
 @dataclass

@@ -28,6 +28,10 @@ MDP (TrueAdapt Sec. V; iiwa7 with a ball on a plate, ``task=trueadapt_on_plate |
           noise on the measured ball position. With ``task.backend=pybullet`` the PyBullet scene
           (:class:`pathrl.sim.vec.PyBulletBall`) simulates the ball instead and draws radius, mass and
           friction itself (the authors' ranges, :func:`pathrl.sim.ball_plate.sample_ball`); evaluation only.
+  critic  with ``critic_obs`` the observation also holds a group ``"critic"`` for an asymmetric critic (PPO only;
+          the policy never reads it): the time left in the trajectory / 10 s, the true ball position / usable
+          half-size and its velocity over the last step / (1 m/s). Without the time left a value function cannot
+          tell a state near the end of a trajectory (little reward to come) from the same state early on.
 """
 
 from __future__ import annotations
@@ -85,6 +89,7 @@ class AdaptEnvCfg:
     ball_mass: tuple[float, float] = (0.002, 0.203)  # kg, uniform per episode (see module docstring)
     sensor_noise: float = 0.002  # std of the measured ball position per axis (m)
     autoreset: bool = True
+    critic_obs: bool = False  # task.adapt.critic_obs: add the privileged group "critic" (module docstring)
     limit_backend: LimitBackend | None = None  # limit code of the steps (pathrl.limits.backend); None: as in effect
 
     def __post_init__(self) -> None:
@@ -165,6 +170,7 @@ class TrueAdaptEnv(_VecEnvBase):
         #: (N,) int8 TerminationReason of the last step (NONE: the episode goes on; pathrl.envs.terminations)
         self.termination = torch.zeros(n, dtype=torch.int8, device=self.device)
         self.meas, self.prev_meas, self.start_meas, self.start_xy = (torch.zeros(n, 2, **f64) for _ in range(4))
+        self.ball_vel = torch.zeros(n, 2, **f64)  # true ball velocity over the last step (m/s), for the critic
         self.ball_mass = torch.zeros(n, **f64)
         self.ep = {k: torch.zeros(n, **f64) for k in ("reward", "acc", "jerk", "offset")}
         self.last_step: dict[str, Tensor] = {}
@@ -201,6 +207,7 @@ class TrueAdaptEnv(_VecEnvBase):
             self.ball.roll_mu[env_ids] = self._uniform(k, self.cfg.rolling_friction)
         self.ball_mass[env_ids] = self._uniform(k, self.cfg.ball_mass)
         self.start_xy[env_ids] = self.ball.xy[env_ids]
+        self.ball_vel[env_ids] = 0.0
         meas = self.ball.xy[env_ids] + self._noise(k)
         self.meas[env_ids], self.prev_meas[env_ids], self.start_meas[env_ids] = meas, meas, meas
         if refresh:
@@ -260,9 +267,18 @@ class TrueAdaptEnv(_VecEnvBase):
         """Observation size."""
         return int(self._obs.shape[1])
 
+    def critic_observation(self) -> Tensor:
+        """The privileged part of the critic's state (N, 5) float32: time left (s) / 10, true ball position / usable
+        half-size (2), its velocity over the last step (2, m/s)."""
+        left = (self.bank.steps[self.traj] - self.episode_length_buf).to(torch.float64) * self.cfg.dt / 10.0
+        return torch.cat([left[:, None], self.ball.xy / self.half, self.ball_vel], dim=1).to(torch.float32)
+
     def get_observations(self) -> TensorDict:
-        """The current observations: ``{"policy": (N, num_obs)}``."""
-        return TensorDict({"policy": self._obs}, batch_size=[self.num_envs], device=self.device)
+        """The current observations: ``{"policy": (N, num_obs)}``, with ``critic_obs`` also ``"critic"`` (N, 5)."""
+        groups = {"policy": self._obs}
+        if self.cfg.critic_obs:
+            groups["critic"] = self.critic_observation()
+        return TensorDict(groups, batch_size=[self.num_envs], device=self.device)
 
     def ball_on(self) -> Tensor:
         """(N,) bool: the ball is still on the plate (analytic model: ``on``; PyBullet scene: ``ok``)."""
@@ -286,9 +302,11 @@ class TrueAdaptEnv(_VecEnvBase):
         a1 = clip_to_range(actions.to(self.device), lim.acc, self.a_min, self.a_max)
         q_c, v_c, a_c = interpolate_step(self.pos, self.vel, self.acc, a1, cfg.dt, self.control_steps)
         p1, v1 = end_of_step(self.pos, self.vel, self.acc, a1, cfg.dt)
+        prev_xy = self.ball.xy.clone()
         self.ball.step(q_c, v_c)
         ref1 = self.reference_at(1)
         xy = self.ball.xy
+        self.ball_vel = (xy - prev_xy) / cfg.dt
         rel = ball_border_position(xy, self.half)
         offset = (xy - self.start_xy).norm(dim=1)
         lost = ball_lost(self.ball_on(), rel, offset, cfg.mode, cfg.max_ball_offset)

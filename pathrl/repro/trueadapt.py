@@ -83,10 +83,18 @@ class AdaptRow:
     ours: str  # what fills our cells
     evaluation: AdaptEval | None = None  # None: nothing shipped for it (a dash)
     in_paper: bool = True
+    paper_row: str | None = None  # a row of ours not in the paper shown beside this paper row's values
+
+    @property
+    def paper_key(self) -> str:
+        """The key of the paper's values shown beside ours."""
+        return self.paper_row or self.key
 
 
 DISTILL = "iiwa7_trueadapt_on_plate_distill_full"
 DISTILL_IN_PLACE = "iiwa7_trueadapt_in_place_distill_f10_decay"
+PPO = "iiwa7_trueadapt_on_plate_ppo"
+_PPO = "distilled policy + PPO on the paper's reward"
 _STUDENT = "distilled policy"
 _STUDENT_F10 = "distilled policy, ten following positions in its state (the paper's: one)"
 
@@ -104,6 +112,8 @@ ROWS: tuple[AdaptRow, ...] = (
     AdaptRow("on_plate/reference", "on plate: reference trajectories (no adaptations)", "the reference replayed",
              AdaptEval("on_plate")),
     AdaptRow("on_plate/test_set", "on plate: TrueAdapt, test set", _STUDENT, AdaptEval("on_plate", DISTILL)),
+    AdaptRow("on_plate/test_set_ppo", "on plate: TrueAdapt, test set", _PPO, AdaptEval("on_plate", PPO),
+             in_paper=False, paper_row="on_plate/test_set"),
     AdaptRow("on_plate/training_set", "on plate: TrueAdapt, training set", _STUDENT + ", first 1000 training "
              "trajectories (data/)", AdaptEval("on_plate", DISTILL, split="train")),
     AdaptRow("on_plate/open_loop_evaluation", "on plate: open loop, evaluation only",
@@ -118,8 +128,10 @@ ROWS: tuple[AdaptRow, ...] = (
     AdaptRow("on_plate/ten_following_positions", "on plate: state with ten following positions",
              _STUDENT + " with the next ten reference positions in its state",
              AdaptEval("on_plate", "iiwa7_trueadapt_on_plate_distill_f10")),
-    AdaptRow("on_plate/no_jerk_penalty", "on plate: no jerk penalty", "not trained"),
-    AdaptRow("on_plate/no_acceleration_penalty", "on plate: no acceleration penalty", "not trained"),
+    AdaptRow("on_plate/no_jerk_penalty", "on plate: no jerk penalty", _PPO + " without the jerk penalty",
+             AdaptEval("on_plate", PPO + "_no_jerk")),
+    AdaptRow("on_plate/no_acceleration_penalty", "on plate: no acceleration penalty",
+             _PPO + " without the acceleration penalty", AdaptEval("on_plate", PPO + "_no_acceleration")),
     AdaptRow("on_plate/tray_controller", "on plate: model-based tray controller", _TRAY,
              AdaptEval("on_plate", "iiwa7_trueadapt_on_plate_tray_controller"), in_paper=False),
     AdaptRow("in_place/reference", "in place: reference trajectories (no adaptations)", "the reference replayed",
@@ -247,7 +259,7 @@ def _cell(value: float | None, paper_value: float | None, task: str, column: str
 def _row_values(results: dict[str, Any], row: AdaptRow) -> tuple[dict[str, Any] | None, dict[str, float | None]]:
     """(raw result or None, the paper's values by column) of a row."""
     p = paper()
-    pv = dict(zip(p["columns"], p["rows"].get(row.key, [None] * len(p["columns"])), strict=True))
+    pv = dict(zip(p["columns"], p["rows"].get(row.paper_key, [None] * len(p["columns"])), strict=True))
     m = None if row.evaluation is None else results.get("trueadapt", {}).get(row.evaluation.id)
     return m, pv
 
@@ -287,7 +299,11 @@ CAPTION = (
     "with the paper's state taught by the tray controller (DAgger, a falling learning rate, its last checkpoint), not "
     "trained with PPO as the paper's; in place "
     "`models/iiwa7_trueadapt_in_place_distill_f10_decay`, the same with ten following positions in the state (the "
-    "paper's ablation state) and a falling learning rate, its last checkpoint. *Tray "
+    "paper's ablation state) and a falling learning rate, its last checkpoint. *Distilled policy + PPO* "
+    "(`models/iiwa7_trueadapt_on_plate_ppo`): the on-plate distilled policy trained on with PPO on the paper's "
+    "reward, 250 iterations of 2048 envs x 16 steps (8.2 M steps), an asymmetric critic that also sees the time "
+    "left and the true ball state, learning alone for the first 50; the penalty ablations are this run with one "
+    "penalty's weight 0. *Tray "
     "controller*: `models/iiwa7_trueadapt_<task>_tray_controller` (`pathrl/baselines/trueadapt_tray.py`), no "
     "learning; it reads privileged information a policy does not get (the whole reference with its velocities and "
     "accelerations, the plate kinematics, its own filter state), so it is a feasibility bound, not a result "

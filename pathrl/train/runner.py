@@ -130,6 +130,12 @@ class PathRLRunner(OnPolicyRunner):
         apply(self.current_learning_iteration)
         self.after_each_update(apply)
 
+    def freeze_actor_normalizer(self) -> None:
+        """Keep the actor's observation normaliser as it is now for the rest of the run."""
+        actor = self.alg.get_policy()
+        actor.update_normalization = lambda obs: None  # instance attribute shadows the method
+        actor.normalizer_frozen = True
+
     def set_critic_warmup(self, iterations: int, learning_rate: float | None = None) -> None:
         """For the first `iterations` iterations of the run (counted from 0, so a resume continues the count)
         only the critic learns: the actor's weights, action std and observation normalizer stay as loaded.
@@ -150,7 +156,8 @@ class PathRLRunner(OnPolicyRunner):
                 return
             for p in actor.parameters():
                 p.requires_grad_(True)
-            del actor.update_normalization
+            if not getattr(actor, "normalizer_frozen", False):
+                del actor.update_normalization
             self.alg.learning_rate = lr0
             for group in self.alg.optimizer.param_groups:
                 group["lr"] = lr0
@@ -340,6 +347,8 @@ def train(cfg: dict[str, Any], run_dir: Path, resume: bool = False) -> dict[str,
 def _schedules(runner: PathRLRunner, cfg: dict[str, Any], total: int) -> None:
     """The per-iteration schedules of a run: critic warm-up, action-noise cap, learning rate, float32 switch."""
     warmup = cfg.get("critic_warmup") or {}
+    if warmup.get("freeze_normalizer"):
+        runner.freeze_actor_normalizer()
     if int(warmup.get("iterations") or 0) > 0:
         lr = warmup.get("learning_rate")
         runner.set_critic_warmup(int(warmup["iterations"]), None if lr is None else float(lr))
