@@ -94,7 +94,9 @@ class AdaptRow:
 DISTILL = "iiwa7_trueadapt_on_plate_distill_full"
 DISTILL_IN_PLACE = "iiwa7_trueadapt_in_place_distill_f10_decay"
 PPO = "iiwa7_trueadapt_on_plate_ppo"
+PPO_IN_PLACE = "iiwa7_trueadapt_in_place_ppo"
 _PPO = "distilled policy + PPO on the paper's reward"
+_PPO_IN_PLACE = "distilled policy with the paper's state (one following position) + PPO on the paper's reward"
 _STUDENT = "distilled policy"
 _STUDENT_F10 = "distilled policy, ten following positions in its state (the paper's: one)"
 
@@ -118,6 +120,9 @@ ROWS: tuple[AdaptRow, ...] = (
              "trajectories (data/)", AdaptEval("on_plate", DISTILL, split="train")),
     AdaptRow("on_plate/open_loop_evaluation", "on plate: open loop, evaluation only",
              _STUDENT + ", ball measurement frozen", AdaptEval("on_plate", DISTILL, open_loop=True)),
+    AdaptRow("on_plate/open_loop_evaluation_ppo", "on plate: open loop, evaluation only",
+             _PPO + ", ball measurement frozen", AdaptEval("on_plate", PPO, open_loop=True), in_paper=False,
+             paper_row="on_plate/open_loop_evaluation"),
     AdaptRow("on_plate/open_loop_training", "on plate: open loop, training and evaluation",
              _STUDENT + " trained with the ball measurement frozen (teacher too), evaluated so",
              AdaptEval("on_plate", "iiwa7_trueadapt_on_plate_distill_open_loop", open_loop=True)),
@@ -138,9 +143,14 @@ ROWS: tuple[AdaptRow, ...] = (
              AdaptEval("in_place")),
     AdaptRow("in_place/test_set", "in place: TrueAdapt, test set", _STUDENT_F10,
              AdaptEval("in_place", DISTILL_IN_PLACE)),
+    AdaptRow("in_place/test_set_ppo", "in place: TrueAdapt, test set", _PPO_IN_PLACE,
+             AdaptEval("in_place", PPO_IN_PLACE), in_paper=False, paper_row="in_place/test_set"),
     AdaptRow("in_place/real_robot", "in place: TrueAdapt, real robot", "no real robot"),
     AdaptRow("in_place/open_loop_evaluation", "in place: open loop, evaluation only",
              _STUDENT_F10 + ", ball measurement frozen", AdaptEval("in_place", DISTILL_IN_PLACE, open_loop=True)),
+    AdaptRow("in_place/open_loop_evaluation_ppo", "in place: open loop, evaluation only",
+             _PPO_IN_PLACE + ", ball measurement frozen", AdaptEval("in_place", PPO_IN_PLACE, open_loop=True),
+             in_paper=False, paper_row="in_place/open_loop_evaluation"),
     AdaptRow("in_place/open_loop_training", "in place: open loop, training and evaluation",
              _STUDENT_F10 + " trained with the ball measurement frozen (teacher too), evaluated so",
              AdaptEval("in_place", "iiwa7_trueadapt_in_place_distill_open_loop", open_loop=True)),
@@ -303,7 +313,8 @@ CAPTION = (
     "(`models/iiwa7_trueadapt_on_plate_ppo`): the on-plate distilled policy trained on with PPO on the paper's "
     "reward, 250 iterations of 2048 envs x 16 steps (8.2 M steps), an asymmetric critic that also sees the time "
     "left and the true ball state, learning alone for the first 50; the penalty ablations are this run with one "
-    "penalty's weight 0. *Tray "
+    "penalty's weight 0; in place (`models/iiwa7_trueadapt_in_place_ppo`) the same recipe from the one-position "
+    "student (`models/iiwa7_trueadapt_in_place_distill_decay`), 600 iterations (19.7 M steps). *Tray "
     "controller*: `models/iiwa7_trueadapt_<task>_tray_controller` (`pathrl/baselines/trueadapt_tray.py`), no "
     "learning; it reads privileged information a policy does not get (the whole reference with its velocities and "
     "accelerations, the plate kinematics, its own filter state), so it is a feasibility bound, not a result "
