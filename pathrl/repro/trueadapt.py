@@ -118,6 +118,9 @@ ROWS: tuple[AdaptRow, ...] = (
              in_paper=False, paper_row="on_plate/test_set"),
     AdaptRow("on_plate/training_set", "on plate: TrueAdapt, training set", _STUDENT + ", first 1000 training "
              "trajectories (data/)", AdaptEval("on_plate", DISTILL, split="train")),
+    AdaptRow("on_plate/training_set_ppo", "on plate: TrueAdapt, training set", _PPO + ", first 1000 training "
+             "trajectories (data/)", AdaptEval("on_plate", PPO, split="train"), in_paper=False,
+             paper_row="on_plate/training_set"),
     AdaptRow("on_plate/open_loop_evaluation", "on plate: open loop, evaluation only",
              _STUDENT + ", ball measurement frozen", AdaptEval("on_plate", DISTILL, open_loop=True)),
     AdaptRow("on_plate/open_loop_evaluation_ppo", "on plate: open loop, evaluation only",
