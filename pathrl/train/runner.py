@@ -130,11 +130,14 @@ class PathRLRunner(OnPolicyRunner):
         apply(self.current_learning_iteration)
         self.after_each_update(apply)
 
-    def freeze_actor_normalizer(self) -> None:
-        """Keep the actor's observation normaliser as it is now for the rest of the run."""
+    def freeze_actor_normalizer(self) -> bool:
+        """Keep the actor's observation normaliser as it is now (until ``del actor.update_normalization``); False
+        when it was frozen already, so that only the caller that froze it thaws it."""
         actor = self.alg.get_policy()
+        if "update_normalization" in vars(actor):
+            return False
         actor.update_normalization = lambda obs: None  # instance attribute shadows the method
-        actor.normalizer_frozen = True
+        return True
 
     def set_critic_warmup(self, iterations: int, learning_rate: float | None = None) -> None:
         """For the first `iterations` iterations of the run (counted from 0, so a resume continues the count)
@@ -149,14 +152,14 @@ class PathRLRunner(OnPolicyRunner):
         lr0 = float(self.alg.learning_rate if learning_rate is None else learning_rate)
         for p in actor.parameters():
             p.requires_grad_(False)
-        actor.update_normalization = lambda obs: None  # instance attribute shadows the method
+        thaw = self.freeze_actor_normalizer()  # False: frozen for the whole run (critic_warmup.freeze_normalizer)
 
         def release(it: int) -> None:
             if it != iterations:
                 return
             for p in actor.parameters():
                 p.requires_grad_(True)
-            if not getattr(actor, "normalizer_frozen", False):
+            if thaw:
                 del actor.update_normalization
             self.alg.learning_rate = lr0
             for group in self.alg.optimizer.param_groups:
