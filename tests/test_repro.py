@@ -25,6 +25,8 @@ from pathrl.repro.tables import (
     TABLE_I_TEST2,
     baselines,
     evaluations,
+    training_method,
+    training_record,
 )
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -55,8 +57,10 @@ def synthetic_results() -> dict:
                                                    "limit_violations_by_kind": {"position": 0, "jerk": 0}}
     one = {"max_compute_to_duration_pct": 6.25, "decision_ms_mean": 5.0, "decision_ms_max": 12.5, "episodes": 50}
     realtime = {"iiwa7": {"policy_and_limits": one, "with_simulation": {**one, "max_compute_to_duration_pct": 8.5}}}
-    training = {"iiwa7_random": {"iterations": 600, "env_steps": 39321600, "num_envs": 4096, "wall_time_s": 1620.0},
-                "iiwa7_ball_balancing_reward": {"iterations": 900}}  # a summary without steps / wall time
+    training = {"iiwa7_random": {"iterations": 600, "env_steps": 39321600, "num_envs": 4096, "wall_time_s": 1620.0,
+                                 "method": "PPO"},
+                "iiwa7_ball_balancing_reward": {"iterations": 900},  # a summary without steps / wall time
+                "iiwa7_random_fast": {"iterations": 1500, "method": "DAgger from law_tracker"}}
     variant = {"episodes": 200, "replan_ms_mean": 7.25, "replan_ms_max": 18.0, "dev_peak_rad_median": 0.175,
                "dev_peak_rad_p95": 0.25, "settled_within_2s_pct": 97.5, "settle_s_median": 0.0, "settle_s_p95": 1.5,
                "duration_after_switch_s": 7.0, "toppra_duration_after_switch_s": 5.6, "learned_over_toppra": 1.25,
@@ -88,13 +92,13 @@ def test_rows_match_paper_tables_and_experiments():
         elif not r.evaluation.generalization and r.table not in OURS_ONLY:
             assert (ROOT / "conf" / "experiment" / f"{r.evaluation.model}.yaml").is_file(), r.evaluation.model
     assert {r.key for r in ROWS if r.table == TABLE_I} == set(PAPER[TABLE_I]["rows"])
-    # every Table I row but ball balancing on a second test split of its own
-    assert {r.key for r in ROWS if r.table == TABLE_I_TEST2} == set(PAPER[TABLE_I]["rows"]) - {"iiwa7/ball_balancing"}
+    # every Table I row on a second test split of its own
+    assert {r.key for r in ROWS if r.table == TABLE_I_TEST2} == set(PAPER[TABLE_I]["rows"])
     assert all((ROOT / "datasets" / r.evaluation.data_robot / r.evaluation.test_dir / "test.npz").is_file()
                for r in ROWS if r.table == TABLE_I_TEST2)
     # knots 5 / 7 / 9 share knot positions, so Tables II / III / I share one TOPP-RA run per dataset (6), plus
-    # one per second test split (5)
-    assert len(baselines()) == 11
+    # one per second test split (6)
+    assert len(baselines()) == 12
 
 
 def test_renderer_golden_markdown_csv_latex():
@@ -125,6 +129,13 @@ def test_renderer_hand_checked_cells():
             "7.00 | 5.60 | 1.25 | 50.0 | 90.0 | 0 / 0 |") in md
     assert "| **97.5** | 0.0 / 1.5 | – | – / – | 7.00 |" in md  # the control has no paired columns
     assert "| 0.0 / – |" in md and "| armar6/random | – |" in md
+    # every learned table says how each row's policy was trained (a dash without a record)
+    table_i = md.split("## Table I: tracking without sensory feedback")[1].split("##")[0]
+    table_ii = md.split("## Table II:")[1].split("##")[0]
+    assert "| 1200 | 0 | DAgger from law_tracker |" in table_i and "| 1200 | 0 | PPO |" in table_ii
+    assert "| 1200 | 0 | – |" in md  # armar4_random (Table IV): evaluated, no training record
+    # budgets: how each policy was trained (a dash for a summary without a config beside it)
+    assert "| iiwa7_random | PPO | 600 | 39.3 | 4096 | 27 |" in md and "| iiwa7_ball_balancing_reward | – | 900 |" in md
     # Table VI's Ruckig and greedy columns: duration, deviation, learned / baseline, violations
     assert (f"| 3.20 | 0.125 | **{m['duration_s'] / 3.2:.2f}** | 0 / 0 | 5.00 | 6.00 | "
             f"**{m['duration_s'] / 5.0:.2f}** | 0 |") in md
@@ -165,3 +176,21 @@ def test_quick_profile_trains_evaluates_and_renders(tmp_path):
     assert (out / "tables.csv").is_file() and (out / "tables.tex").is_file()
     assert (out / "figures" / "pareto_table_II.png").is_file()
     assert (out / "figures" / "paths_iiwa7_random_fast.png").is_file()
+
+
+def test_training_record_names_the_method_from_the_shipped_config(tmp_path):
+    """PPO for a PPO run, "DAgger from <teacher>" for a distilled student; no summary: None."""
+    ppo, student = tmp_path / "ppo", tmp_path / "student"
+    for d, cfg in ((ppo, {"agent": {"algorithm": {"class_name": "PPO"}}}),
+                   (student, {"agent": {"algorithm": {"class_name": "Distillation"}},
+                              "teacher": {"name": "law_tracker", "limit_margin": 1.0}})):
+        d.mkdir()
+        (d / "summary.json").write_text(json.dumps({"iterations": 3}))
+        (d / "config.yaml").write_text(yaml.safe_dump(cfg))
+    assert training_record(ppo) == {"iterations": 3, "method": "PPO"}
+    assert training_record(student)["method"] == "DAgger from law_tracker"
+    assert training_record(tmp_path / "nothing") is None
+    assert training_method({"controller": {"name": "greedy"}, "agent": {"algorithm": {"class_name": "PPO"}}}) \
+        == "not trained (greedy)"
+    assert training_method({"controller": {"name": "balance", "policy": "models/upper_body"}}) \
+        == "balance around upper_body"

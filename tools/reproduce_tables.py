@@ -59,6 +59,7 @@ try:  # the rows are read from sweeps/<table>.yaml at import: a broken file is i
         baselines,
         evaluations,
         select,
+        training_record,
         warm_chain,
     )
 except SweepsError as exc:
@@ -378,9 +379,8 @@ def collect(lay: Layout) -> dict:
             res["baselines"][b.id] = json.loads(p.read_text())
     res["training"] = {}
     for model in dict.fromkeys(m for e in evaluations() for m in (*warm_chain(e.model), e.model)):
-        p = lay.models / model / "summary.json"
-        if p.is_file():
-            res["training"][model] = json.loads(p.read_text())
+        if (record := training_record(lay.models / model)) is not None:
+            res["training"][model] = record
     res["path_change"] = {}
     for key, _, _ in PATH_CHANGE:
         p = path_change_file(lay, key)

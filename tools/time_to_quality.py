@@ -3,7 +3,8 @@
     python tools/time_to_quality.py --run runs/iiwa7_random/seed0 --row iiwa7/random [--run OTHER --label ...]
 
 Each run's checkpoints (every ``--every`` iterations and the last) are evaluated with the paper's protocol
-(deterministic policy, 1200 test segments of ``datasets/<robot>/<dataset>``, the committed split), then
+(deterministic policy, 1200 test segments of ``datasets/<robot>/<dataset>``, the committed split; whole paths with
+``--segments full``, as the ball-balancing row), then
 ``--out`` gets ``curve.json`` (per run: the points, the target and the minutes to reach it) and ``curve.png``
 (duration and mean Cartesian deviation against training wall time). The target is a Table I row of
 ``tools/paper_tables.yaml``: duration <= the paper's, mean Cartesian deviation <= ``--dev-factor`` x the
@@ -50,7 +51,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--dev-factor", type=float, default=1.0, help="allowed deviation over the paper's (default 1)")
     ap.add_argument("--dataset", help="dataset directory (default: datasets/<robot>/<dataset> of the run)")
     ap.add_argument("--every", type=int, default=50, help="evaluate checkpoints every this many iterations")
-    ap.add_argument("--episodes", type=int, default=1200)
+    ap.add_argument("--episodes", type=int, help="episodes per checkpoint (default: 1200 segments, or every path with "
+                    "--segments full)")
+    ap.add_argument("--segments", choices=("paper", "full"), default="paper",
+                    help="the paper's random segments (default) or whole paths (the ball-balancing row)")
     ap.add_argument("--out", type=Path, required=True, help="output directory (curve.json, curve.png, cache)")
     args = ap.parse_args(argv)
     labels = args.label or [str(r) for r in args.run]
@@ -63,10 +67,12 @@ def main(argv: list[str] | None = None) -> int:
             if not (run / "config.yaml").is_file():
                 raise ValueError(f"--run: {run} is not a run directory (no config.yaml)")
             dataset = args.dataset or default_dataset(run)
-            pts = evaluate_curve(run, dataset, args.out / label.replace("/", "_"), args.every, args.episodes)
+            episodes = args.episodes or (1200 if args.segments == "paper" else None)
+            pts = evaluate_curve(run, dataset, args.out / label.replace("/", "_"), args.every, episodes,
+                                 segments=args.segments)
             curves[label] = pts
             records.append(curve_record(pts, target, {"label": label, "run": str(run), "dataset": dataset,
-                                                      "episodes": args.episodes}))
+                                                      "segments": args.segments, "episodes": episodes}))
     except (ValueError, OSError) as exc:
         print(f"error: {str(exc).splitlines()[0]}", file=sys.stderr)
         return 2

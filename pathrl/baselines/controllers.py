@@ -11,6 +11,7 @@ from torch import Tensor
 from pathrl.baselines.balance import BalanceCfg, BalanceController
 from pathrl.baselines.ball_feedback import TrayController, TrayControllerCfg
 from pathrl.baselines.greedy_follower import GreedyCfg, GreedyFollower
+from pathrl.baselines.law_tracker import LawTracker, LawTrackerCfg
 from pathrl.baselines.trueadapt_tray import AdaptTrayCfg, AdaptTrayController
 from pathrl.envs.tracking import PathTrackingEnv
 
@@ -37,10 +38,11 @@ class ReferenceReplay:
 
 CONTROLLERS = {"tray": (TrayController, TrayControllerCfg), "greedy": (GreedyFollower, GreedyCfg),
                "reference": (ReferenceReplay, ReferenceReplayCfg), "balance": (BalanceController, BalanceCfg),
-               "trueadapt_tray": (AdaptTrayController, AdaptTrayCfg)}
+               "trueadapt_tray": (AdaptTrayController, AdaptTrayCfg),
+               "law_tracker": (LawTracker, LawTrackerCfg)}
 
 
-def make_controller(spec: dict, env: PathTrackingEnv) -> TrayController | GreedyFollower | ReferenceReplay:
+def make_controller(spec: dict, env: PathTrackingEnv) -> TrayController | GreedyFollower | LawTracker | ReferenceReplay:
     """The controller named by `spec` (``{"name": "tray", **gains}``) for `env`; ValueError on a bad spec."""
     if not isinstance(spec, dict) or spec.get("name") not in CONTROLLERS:
         name = spec.get("name") if isinstance(spec, dict) else spec

@@ -6,6 +6,8 @@ For every whole path of a :class:`~pathrl.paths.pathset.PathSet`:
    limits (scaled by ``limit_margin``) and a box bound ``plate_acc`` (m/s^2) on each world component of the
    plate's acceleration, :class:`PlateAccelerationConstraint`. The plate acceleration is what the tray has
    to tilt into, so bounding it bounds the tilt (``tan(tilt) <= plate_acc / g``).
+   Without a plate (``plate=None``) only the joint limits bound it: the time-optimal law that
+   :mod:`pathrl.baselines.law_tracker` tracks.
 2. **Smoothed** by a moving average of the path velocity over ``smooth_s`` seconds: the tilt then turns at a
    bounded rate (toppra's accelerations are bang-bang: an instant tilt). The average keeps the arc length
    and adds ``smooth_s`` to the duration.
@@ -72,8 +74,8 @@ class PlateAccelerationConstraint(LinearConstraint):
 
 def tray_time_law(knots: np.ndarray, vel: np.ndarray, acc: np.ndarray, plate, cfg: TimeLawCfg) -> np.ndarray:
     """Arc length (K,) at ``t = k * cfg.sample_dt`` of the module docstring's law for one path (knots (K0, M);
-    vel, acc (M,) limits; ``plate`` as in :class:`PlateAccelerationConstraint`). Ends exactly at the path's
-    length, at rest."""
+    vel, acc (M,) limits; ``plate`` as in :class:`PlateAccelerationConstraint`, or None: joint limits only). Ends
+    exactly at the path's length, at rest."""
     spline = fit_spline(knots)
     u_table, s_table = arc_length_table(spline, knots)
     length = float(s_table[-1])
@@ -82,8 +84,9 @@ def tray_time_law(knots: np.ndarray, vel: np.ndarray, acc: np.ndarray, plate, cf
     grid = np.interp(np.linspace(0.0, length, n), s_table, u_table)
     grid[0], grid[-1] = 0.0, 1.0
     cons = [constraint.JointVelocityConstraint(cfg.limit_margin * vel),
-            constraint.JointAccelerationConstraint(cfg.limit_margin * acc),
-            PlateAccelerationConstraint(plate, cfg.plate_acc)]
+            constraint.JointAccelerationConstraint(cfg.limit_margin * acc)]
+    if plate is not None:
+        cons.append(PlateAccelerationConstraint(plate, cfg.plate_acc))
     inst = algo.TOPPRA(cons, path, gridpoints=grid, solver_wrapper="seidel")
     inst.compute_parameterization(0.0, 0.0)
     sd = inst.problem_data.sd_vec
@@ -142,7 +145,8 @@ class TimeLawTable:
 
 
 def build_time_laws(paths: PathSet, vel: Tensor, acc: Tensor, plate, cfg: TimeLawCfg) -> TimeLawTable:
-    """:func:`tray_time_law` of every path of `paths` (limits (M,) of the path joints), tabulated."""
+    """:func:`tray_time_law` of every path of `paths` (limits (M,) of the path joints; `plate` None: joint limits
+    only), tabulated."""
     laws = []
     for p in range(paths.num_paths):
         k = int(paths.num_knots[p])

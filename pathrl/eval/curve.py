@@ -60,12 +60,13 @@ def checkpoint_wall_time(path: Path) -> float | None:
     return None if t is None else float(t)
 
 
-def evaluate_curve(run_dir: Path, dataset: str, out_dir: Path, every: int = 50, episodes: int = 1200,
-                   progress: bool = True) -> list[CurvePoint]:
-    """Evaluate every selected checkpoint of `run_dir` on the test split of `dataset`.
+def evaluate_curve(run_dir: Path, dataset: str, out_dir: Path, every: int = 50, episodes: int | None = 1200,
+                   progress: bool = True, segments: str = "paper") -> list[CurvePoint]:
+    """Evaluate every selected checkpoint of `run_dir` on the test split of `dataset` (`segments`: the paper's
+    random segments, or ``full`` paths; `episodes` None: one per path with ``full``).
 
-    Each evaluation's metrics.json lands in ``out_dir/model_<k>/``; an existing one for the same dataset and
-    episode count is reused, so an interrupted curve continues where it stopped.
+    Each evaluation's metrics.json lands in ``out_dir/model_<k>/``; an existing one for the same dataset,
+    segments and episode count is reused, so an interrupted curve continues where it stopped.
     """
     from pathrl.eval.evaluate import evaluate
 
@@ -73,12 +74,12 @@ def evaluate_curve(run_dir: Path, dataset: str, out_dir: Path, every: int = 50, 
     points = []
     for k, ckpt in checkpoints(run_dir, every):
         out = Path(out_dir) / ckpt.stem
-        m = _cached(out / "metrics.json", dataset, episodes)
+        m = _cached(out / "metrics.json", dataset, episodes, segments)
         if m is None:
             if progress:
                 print(f"evaluate {ckpt}")
-            m = evaluate(run_dir, dataset_path=dataset, episodes=episodes, out_dir=out, record=False,
-                         progress=False, checkpoint=ckpt.name)
+            m = evaluate(run_dir, dataset_path=dataset, episodes=episodes, segments=segments, out_dir=out,
+                         record=False, progress=False, checkpoint=ckpt.name)
         points.append(CurvePoint(k + 1, (k + 1) * steps_per_it, checkpoint_wall_time(ckpt), float(m["duration_s"]),
                                  float(m["cart_pos_dev_mean_cm"]), int(m["limit_violations"])))
     return points
@@ -140,8 +141,9 @@ def _steps_per_iteration(run_dir: Path) -> int:
     return int(cfg["agent"]["num_steps_per_env"]) * int(cfg["env"]["num_envs"])
 
 
-def _cached(path: Path, dataset: str, episodes: int) -> dict | None:
+def _cached(path: Path, dataset: str, episodes: int | None, segments: str) -> dict | None:
     if not path.is_file():
         return None
     m = json.loads(path.read_text())
-    return m if m.get("dataset") == str(dataset) and m.get("episodes") == episodes else None
+    same = m.get("dataset") == str(dataset) and m.get("segments", "paper") == segments
+    return m if same and (episodes is None or m.get("episodes") == episodes) else None

@@ -87,8 +87,9 @@ def _learned_table(results: dict[str, Any], paper: dict[str, Any], table: str) -
     cols = _columns(paper, table)
     pcols = ptable["columns"]
     lines = [f"## {TITLES[table]}", "",
-             "| row | " + " | ".join(cols) + " | learned / TOPP-RA | episodes | limit violations |",
-             "|---|" + "---|" * (len(cols) + 3)]
+             "| row | " + " | ".join(cols) + " | learned / TOPP-RA | episodes | limit violations | trained by |",
+             "|---|" + "---|" * (len(cols) + 4)]
+    training = results.get("training") or {}
     csv_rows: list[list[str]] = []
     for row in (r for r in ROWS if r.table == table):
         p = dict(zip(pcols, ptable["rows"].get(row.key, []), strict=False))
@@ -99,7 +100,8 @@ def _learned_table(results: dict[str, Any], paper: dict[str, Any], table: str) -
             rel = f"{m['duration_s'] / tp['toppra_duration_s']:.2f}"
         eps = "–" if m is None else str(m["episodes"])
         viol = "–" if m is None else str(m["limit_violations"])
-        lines.append(f"| {row.key} | " + " | ".join(cells) + f" | {rel} | {eps} | {viol} |")
+        method = "–" if m is None else training.get(row.evaluation.model, {}).get("method", "–")
+        lines.append(f"| {row.key} | " + " | ".join(cells) + f" | {rel} | {eps} | {viol} | {method} |")
         for c in cols:
             csv_rows.append([table, row.key, c, "" if m is None or m.get(c) is None else f"{m[c]:.6g}",
                              "" if p.get(c) is None else f"{p[c]:g}"])
@@ -242,15 +244,16 @@ def _training(results: dict[str, Any]) -> list[str]:
              "From `models/<policy>/summary.json`; wall time on the 2-core reference machine, not always idle (a "
              "warm-started policy's budget excludes its source's). The authors' budget from their checkpoints' "
              "metadata.", "",
-             "| policy | iterations (PPO or DAgger) | env steps (M) | envs | wall time (min) | warm start from | "
+             "| policy | trained by | iterations | env steps (M) | envs | wall time (min) | warm start from | "
              "authors: env steps (M) / wall time (h) |",
-             "|---|---|---|---|---|---|---|"]
+             "|---|---|---|---|---|---|---|---|"]
     for model, sm in budgets.items():
         if sm.get("controller"):  # a model-based controller: nothing trained
             continue
         steps = sm.get("env_steps")
         wall = sm.get("wall_time_s")
-        lines.append(f"| {model} | {sm.get('iterations', '–')} | {_fmt(None if steps is None else steps / 1e6, 1)} | "
+        lines.append(f"| {model} | {sm.get('method', '–')} | {sm.get('iterations', '–')} | "
+                     f"{_fmt(None if steps is None else steps / 1e6, 1)} | "
                      f"{sm.get('num_envs', '–')} | {_fmt(None if wall is None else wall / 60.0, 0)} | "
                      f"{WARM_STARTS.get(model, '–')} | {_theirs(model)} |")
     return lines

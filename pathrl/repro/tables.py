@@ -8,7 +8,12 @@ Tables I, II, III and VI), so each is computed once. The rows are read from ``sw
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import yaml
 
 from pathrl.config.paths import CONF_DIR
 from pathrl.repro.sweeps import SWEEPS_DIR, load_tables, warm_starts
@@ -18,7 +23,7 @@ __all__ = [
     "PAPER_TABLE", "PATH_CHANGE", "PATH_ROBOT", "REALTIME", "ROWS", "Row", "SHORT_COLUMNS", "SWEEPS", "TABLE_FILES",
     "TABLE_GREEDY", "TABLE_I", "TABLE_II", "TABLE_III", "TABLE_IV", "TABLE_IX", "TABLE_I_TEST2", "TABLE_PATH_CHANGE",
     "TABLE_V", "TABLE_VI", "TABLE_VII", "TABLE_VIII", "TEST2_SUFFIX", "WARM_STARTS", "baselines", "evaluations",
-    "greedy_model", "select", "table_i_row", "warm_chain",
+    "greedy_model", "select", "table_i_row", "training_method", "training_record", "warm_chain",
 ]
 
 #: Columns of Tables II-IV (and the deviation columns of the Pareto plot).
@@ -181,10 +186,38 @@ def warm_chain(model: str) -> list[str]:
     return chain
 
 
+def training_method(cfg: dict[str, Any]) -> str:
+    """How the policy of a run config was trained: ``PPO``, ``DAgger from <teacher>`` for a distilled student,
+    ``not trained (<controller>)`` for a model-based controller's directory, ``<controller> around <model>`` for a
+    controller that wraps a shipped policy."""
+    controller = cfg.get("controller")
+    if controller:
+        name = controller.get("name", "controller")
+        policy = controller.get("policy")
+        return f"{name} around {Path(policy).name}" if policy else f"not trained ({name})"
+    algorithm = ((cfg.get("agent") or {}).get("algorithm") or {}).get("class_name", "PPO")
+    if algorithm == "Distillation":
+        return f"DAgger from {(cfg.get('teacher') or {}).get('name', 'a controller')}"
+    return str(algorithm)
+
+
+def training_record(model_dir: Path) -> dict[str, Any] | None:
+    """A shipped policy's ``summary.json`` with its ``method`` (:func:`training_method` of its config.yaml); None
+    if it has no summary."""
+    summary, config = Path(model_dir) / "summary.json", Path(model_dir) / "config.yaml"
+    if not summary.is_file():
+        return None
+    record = json.loads(summary.read_text())
+    if config.is_file():
+        record["method"] = training_method(yaml.safe_load(config.read_text()) or {})
+    return record
+
+
 #: The authors' budget per policy: (million env steps, wall time in hours), from their checkpoints' training
 #: metadata (iterations x train batch; Ray RLlib on a cluster node).
 AUTHORS_BUDGETS = {"iiwa7_random": (195, 45.2), "iiwa7_target_point": (300, 65.3),
                    "iiwa7_ball_balancing": (150, 30.8), "iiwa7_ball_balancing_length_lt": (150, 30.8),
+                   "iiwa7_ball_balancing_track_distill": (150, 30.8),
                    "iiwa7_ball_balancing_reward": (629, 122.5),
                    "armar6_random": (619, 238.4), "armar4_random": (137, 137.0), "armar4_target_point": (110, 93.8),
                    "armar4_target_point_balancing": (156, 176.8), "armar4_legs_target_point_balancing": (169, 229.9)}

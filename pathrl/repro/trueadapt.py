@@ -18,6 +18,8 @@ from typing import Any
 
 import yaml
 
+from pathrl.repro.tables import training_record
+
 __all__ = [
     "AdaptEval", "AdaptRow", "COLUMNS", "EPISODES", "REALTIME_ID", "ROWS", "TRAIN_MISSING", "VALIDATION_ID", "collect",
     "eval_command", "evaluations", "latex", "markdown", "names", "ours", "paper", "realtime_command", "unavailable",
@@ -241,9 +243,9 @@ def collect(raw: Path, models: Path) -> dict[str, Any]:
         p = raw / e.id / "metrics.json"
         if p.is_file() and (e.model is None or (models / e.model).is_dir()):
             out["trueadapt"][e.id] = json.loads(p.read_text())
-        s = models / (e.model or "-") / "summary.json"
-        if e.model and s.is_file():
-            out["trueadapt_training"][e.model] = json.loads(s.read_text())
+        record = training_record(models / e.model) if e.model else None
+        if record is not None:
+            out["trueadapt_training"][e.model] = record
     for key in (VALIDATION_ID, REALTIME_ID):
         if (raw / f"{key}.json").is_file():
             out[key] = json.loads((raw / f"{key}.json").read_text())
