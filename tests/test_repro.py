@@ -41,7 +41,8 @@ def synthetic_results() -> dict:
     """Fixed numbers for some rows (others missing): every branch of the renderer."""
     evs = {}
     for i, e in enumerate(evaluations()):
-        if e.model in ("iiwa7_random_fast", "iiwa7_random", "iiwa7_random_length_eq_deviation", "armar4_random"):
+        if e.model in ("iiwa7_random_track_distill", "iiwa7_random", "iiwa7_random_length_eq_deviation",
+                       "armar4_random"):
             m = {k: round(1.0 + 0.25 * i + 0.01 * j, 4) for j, k in enumerate(METRICS)}
             evs[e.id] = {**m, "episodes": 1200, "limit_violations": 0}
         if e.model == "greedy_iiwa7_random":
@@ -60,7 +61,7 @@ def synthetic_results() -> dict:
     training = {"iiwa7_random": {"iterations": 600, "env_steps": 39321600, "num_envs": 4096, "wall_time_s": 1620.0,
                                  "method": "PPO"},
                 "iiwa7_ball_balancing_reward": {"iterations": 900},  # a summary without steps / wall time
-                "iiwa7_random_fast": {"iterations": 1500, "method": "DAgger from law_tracker"}}
+                "iiwa7_random_track_distill": {"iterations": 1500, "method": "DAgger from law_tracker"}}
     variant = {"episodes": 200, "replan_ms_mean": 7.25, "replan_ms_max": 18.0, "dev_peak_rad_median": 0.175,
                "dev_peak_rad_p95": 0.25, "settled_within_2s_pct": 97.5, "settle_s_median": 0.0, "settle_s_p95": 1.5,
                "duration_after_switch_s": 7.0, "toppra_duration_after_switch_s": 5.6, "learned_over_toppra": 1.25,
@@ -114,7 +115,7 @@ def test_renderer_golden_markdown_csv_latex():
 def test_renderer_hand_checked_cells():
     res = synthetic_results()
     md, rows = render_markdown(res, PAPER, "full")
-    m = res["evaluations"]["iiwa7_random_fast"]
+    m = res["evaluations"]["iiwa7_random_track_distill"]
     # Table I iiwa7/random duration: ours / paper (ratio)
     assert f"**{m['duration_s']:.2f}** / 4.28 ({m['duration_s'] / 4.28:.2f})" in md
     tp = res["baselines"]["toppra_iiwa7_random_paper"]["toppra_duration_s"]
@@ -157,25 +158,25 @@ def test_unknown_only_is_a_one_line_error():
 
 @pytest.mark.slow
 def test_quick_profile_trains_evaluates_and_renders(tmp_path):
-    """`make reproduce-tables PROFILE=quick TRAIN=1` on two rows: tiny datasets, tiny training, every output."""
+    """`make reproduce-tables PROFILE=quick TRAIN=1` on three rows: tiny datasets, tiny training, every output."""
     out = tmp_path / "quick"
-    r = subprocess.run([sys.executable, "tools/reproduce_tables.py", "--profile", "quick", "--train",
-                        "--only", "iiwa7_random_fast,iiwa7_random_length_eq_deviation", "--out", str(out)],
-                       cwd=ROOT, capture_output=True, text=True, timeout=900)
+    only = "iiwa7_random_track_distill,iiwa7_random_length_eq_deviation,iiwa7_ball_balancing_reward"
+    r = subprocess.run([sys.executable, "tools/reproduce_tables.py", "--profile", "quick", "--train", "--only", only,
+                        "--out", str(out)], cwd=ROOT, capture_output=True, text=True, timeout=900)
     assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
     md = (out / "tables.md").read_text()
-    m = json.loads((out / "raw" / "iiwa7_random_fast" / "metrics.json").read_text())
+    m = json.loads((out / "raw" / "iiwa7_random_track_distill" / "metrics.json").read_text())
     assert m["episodes"] == 12 and m["limit_violations"] == 0
-    assert f"**{m['duration_s']:.2f}** / 4.28" in md
-    # the Table I row is warm-started from iiwa7_random_continue, itself from iiwa7_random: the chain is trained and
-    # shipped first
-    assert (out / "models" / "iiwa7_random" / "model.pt").is_file()
-    assert (out / "models" / "iiwa7_random_continue" / "model.pt").is_file()
-    assert (out / "models" / "iiwa7_random_fast" / "model.pt").is_file()
+    assert f"**{m['duration_s']:.2f}** / 4.28" in md and "| DAgger from law_tracker |" in md
+    # a distilled student (its teacher builds each tiny path's law), a PPO policy, and a warm start: the ball
+    # reward row starts from iiwa7_ball_balancing, which is trained and shipped first
+    for model in ("iiwa7_random_track_distill", "iiwa7_random_length_eq_deviation", "iiwa7_ball_balancing",
+                  "iiwa7_ball_balancing_reward"):
+        assert (out / "models" / model / "model.pt").is_file(), model
     assert (out / "raw" / "toppra_iiwa7_random_paper.json").is_file()
     assert (out / "tables.csv").is_file() and (out / "tables.tex").is_file()
     assert (out / "figures" / "pareto_table_II.png").is_file()
-    assert (out / "figures" / "paths_iiwa7_random_fast.png").is_file()
+    assert (out / "figures" / "paths_iiwa7_random_track_distill.png").is_file()
 
 
 def test_training_record_names_the_method_from_the_shipped_config(tmp_path):
