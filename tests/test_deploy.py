@@ -146,6 +146,21 @@ def test_export_round_trip_matches_pytorch(tmp_path):
     assert main(["model=foo"]) == 2
 
 
+def test_a_distilled_student_with_float32_mixed_precision_layers_exports(tmp_path):
+    """The Table I student (pathrl's mixed-precision MLP with float32 hidden layers, a subclass TorchScript cannot
+    script) is exported as rsl-rl's stock MLP with the same weights."""
+    import json
+
+    from pathrl.cli.export import main
+
+    out = tmp_path / "export"
+    assert main([f"run_dir={ROOT / 'models' / 'iiwa7_random_track_distill'}", f"out={out}", f"dataset.path={DATASET}",
+                 "observations=200"]) == 0
+    report = json.loads((out / "export.json").read_text())
+    assert report["hidden_dtype"] == "float32" and report["max_abs_diff_trained_dtype"] == 0.0
+    assert report["max_abs_diff_torchscript"] <= 1e-5 and report["max_abs_diff_onnx"] <= 1e-5
+
+
 def test_settle_time_by_hand():
     from pathrl.eval.path_change import SwitchEpisode
 

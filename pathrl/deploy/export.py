@@ -32,11 +32,12 @@ EXPORT_ATOL = 1e-5
 
 
 def float32_actor(policy: torch.nn.Module) -> torch.nn.Module:
-    """The policy computing in float32 throughout (a mixed-precision MLP becomes rsl-rl's stock MLP, same weights)."""
+    """The policy computing in float32 throughout (a mixed-precision MLP, float32 hidden layers included, becomes
+    rsl-rl's stock MLP with the same weights: only that one scripts)."""
     import copy
 
     actor = copy.deepcopy(policy).eval()
-    if getattr(actor.mlp, "dtype", torch.float32) != torch.float32:
+    if type(actor.mlp) is not MLP:
         plain = MLP.__new__(MLP)
         torch.nn.Sequential.__init__(plain, *actor.mlp)
         actor.mlp = plain
