@@ -216,7 +216,7 @@ def training_record(model_dir: Path) -> dict[str, Any] | None:
 #: The authors' budget per policy: (million env steps, wall time in hours), from their checkpoints' training
 #: metadata (iterations x train batch; Ray RLlib on a cluster node).
 AUTHORS_BUDGETS = {"iiwa7_random": (195, 45.2), "iiwa7_random_track_distill": (195, 45.2),
-                   "iiwa7_target_point": (300, 65.3),
+                   "iiwa7_target_point": (300, 65.3), "iiwa7_target_point_track_distill": (300, 65.3),
                    "iiwa7_ball_balancing": (150, 30.8), "iiwa7_ball_balancing_length_lt": (150, 30.8),
                    "iiwa7_ball_balancing_track_distill": (150, 30.8),
                    "iiwa7_ball_balancing_reward": (629, 122.5),
