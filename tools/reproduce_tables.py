@@ -71,8 +71,8 @@ from pathrl.train.ship import read_curve  # noqa: E402
 BIN = Path(sys.executable).parent
 PAPER = yaml.safe_load((ROOT / "tools" / "paper_tables.yaml").read_text())
 #: Evaluations whose episodes are drawn as example path overlays (one per robot).
-OVERLAYS = {"iiwa7_random_track_distill": "KUKA iiwa 7, random path", "armar6_random_continue": "ARMAR-6, random path",
-            "armar4_random": "ARMAR-4 (fixed base), random path"}
+OVERLAYS = {"iiwa7_random_track_distill": "KUKA iiwa 7, random path",
+            "armar6_random_track_distill": "ARMAR-6, random path", "armar4_random": "ARMAR-4 (fixed base), random path"}
 
 
 @dataclass(frozen=True)

@@ -220,7 +220,8 @@ AUTHORS_BUDGETS = {"iiwa7_random": (195, 45.2), "iiwa7_random_track_distill": (1
                    "iiwa7_ball_balancing": (150, 30.8), "iiwa7_ball_balancing_length_lt": (150, 30.8),
                    "iiwa7_ball_balancing_track_distill": (150, 30.8),
                    "iiwa7_ball_balancing_reward": (629, 122.5),
-                   "armar6_random": (619, 238.4), "armar4_random": (137, 137.0),
+                   "armar6_random": (619, 238.4), "armar6_random_track_distill": (619, 238.4),
+                   "armar4_random": (137, 137.0),
                    "armar4_random_track_distill": (137, 137.0), "armar4_target_point": (110, 93.8),
                    "armar4_target_point_track_distill": (110, 93.8),
                    "armar4_target_point_balancing": (156, 176.8), "armar4_legs_target_point_balancing": (169, 229.9)}
