@@ -170,6 +170,18 @@ def test_settle_time_by_hand():
     assert ep([0.1, 0.3, 0.4, 0.3]).settle_s(0.15, 0.1) == float("inf")
 
 
+def test_settle_in_band_and_band_by_hand():
+    from pathrl.eval.path_change import SwitchEpisode, peak_band, tracking_level
+
+    ep = lambda devs: SwitchEpisode(0, 1.0, 5.0, 3.0, True, devs)  # noqa: E731
+    assert ep([0.1, 0.2, 0.1]).settle_in_band_s(0.25, 0.1) == 0.0  # never outside the band
+    assert ep([0.1, 0.3, 0.2, 0.1]).settle_in_band_s(0.25, 0.1) == pytest.approx(0.2)  # inside from step 2 on
+    assert ep([0.3, 0.1, 0.1, 0.1, 0.26]).settle_in_band_s(0.25, 0.1) == pytest.approx(0.5)  # the last step counts
+    unchanged = [np.array([0.1, 0.4]), np.array([0.2, 0.2, 0.1]), np.array([0.3])]
+    assert peak_band(unchanged, 0.5) == pytest.approx(0.3)  # median of the per-path peaks 0.4, 0.2, 0.3
+    assert tracking_level(unchanged, 0.5) == pytest.approx(0.2)  # median of all six steps
+
+
 def test_settle_against_the_control_by_hand():
     from pathrl.eval.path_change import excess_vs_control, settle_vs_control
 

@@ -67,10 +67,11 @@ def synthetic_results() -> dict:
                "duration_after_switch_s": 7.0, "toppra_duration_after_switch_s": 5.6, "learned_over_toppra": 1.25,
                "toppra_solve_ms_mean": 50.0, "toppra_from_motion_feasible_pct": 90.0, "limit_violations": 0,
                "toppra_violations": 0, "settled_vs_control_within_2s_pct": 98.5, "excess_after_2s_rad_median": 0.0,
-               "excess_after_2s_rad_p95": 0.0125}
+               "excess_after_2s_rad_p95": 0.0125, "settle_band_rad": 0.25, "settled_in_band_within_2s_pct": 99.0,
+               "settle_in_band_s_median": 0.0, "settle_in_band_s_p95": 0.5, "left_band_pct": 7.5}
     none = {k: v for k, v in variant.items() if "control" not in k and "excess" not in k}
-    path_change = {"iiwa7/random": {"variants": {"none": none, "gentle": variant,
-                                                 "sharp": {**variant, "settle_s_p95": None}}}}
+    older = {k: v for k, v in variant.items() if "band" not in k}  # a result written before the band columns
+    path_change = {"iiwa7/random": {"variants": {"none": none, "gentle": variant, "sharp": older}}}
     return {"evaluations": evs, "baselines": bases, "realtime": realtime, "training": training,
             "path_change": path_change}
 
@@ -125,11 +126,11 @@ def test_renderer_hand_checked_cells():
     csv_ours = {(r[0], r[1], r[2]): r[3] for r in rows[1:]}
     assert float(csv_ours[(TABLE_I, "iiwa7/random", "duration_s")]) == pytest.approx(m["duration_s"])
     assert csv_ours[(TABLE_I, "armar6/random", "duration_s")] == ""
-    # path adjustments: a measured row, a settle quantile that never came (dash), a robot without results
-    assert ("| iiwa7/random gentle | 200 | 7.2 / 18.0 | 0.175 / 0.250 | **97.5** | 0.0 / 1.5 | 98.5 | 0.000 / 0.013 | "
-            "7.00 | 5.60 | 1.25 | 50.0 | 90.0 | 0 / 0 |") in md
-    assert "| **97.5** | 0.0 / 1.5 | – | – / – | 7.00 |" in md  # the control has no paired columns
-    assert "| 0.0 / – |" in md and "| armar6/random | – |" in md
+    # path adjustments: a measured row, a result without the band columns (dashes), a robot without results
+    assert ("| iiwa7/random gentle | 200 | 7.2 / 18.0 | 0.175 / 0.250 | 0.250 | **99.0** | 0.0 / 0.5 | 7.5 | 97.5 | "
+            "98.5 | 0.000 / 0.013 | 7.00 | 5.60 | 1.25 | 50.0 | 90.0 | 0 / 0 |") in md
+    assert "| 7.5 | 97.5 | – | – / – | 7.00 |" in md  # the control has no paired columns
+    assert "| 0.175 / 0.250 | – | **–** | – / – | – | 97.5 | 98.5 |" in md and "| armar6/random | – |" in md
     # every learned table says how each row's policy was trained (a dash without a record)
     table_i = md.split("## Table I: tracking without sensory feedback")[1].split("##")[0]
     table_ii = md.split("## Table II:")[1].split("##")[0]

@@ -10,7 +10,10 @@ The env's fused step (also native in the first mode) and observation kernels are
 two. Threads: 1; 2 (``*_threads2``: torch on both cores, as ``pathrl-train`` runs with ``threads: 2``; the
 native code follows torch's count); and ``*_cores2``: torch on 1 thread, the native code on 2 (torch's
 OpenMP workers spin between ops and compete with the native threads, so on 2 cores this is the faster
-setup for stepping). Compilation happens in untimed warm-up steps. ``--quick``: tiny sizes.
+setup for stepping). Compilation happens in untimed warm-up steps. PPO iterations run with the models' hidden
+layers in bfloat16 (the default) where the CPU has bfloat16 natively, else in float32 only
+(``bfloat16_over_float32_layer``: the measured slowdown; emulated bfloat16 would take most of the bench's time).
+``--quick``: tiny sizes.
 """
 
 from __future__ import annotations
@@ -326,12 +329,18 @@ def main() -> None:
     res["reference_iiwa7"] = bench_reference("iiwa7", sec)
     ref_rate = res["reference_iiwa7"]["env_steps_per_s"]
     res["batched_over_reference_iiwa7"] = res[main_key]["env_steps_per_s"] / ref_rate
+    from pathrl.policy.models import bfloat16_slowdown
+
+    # bfloat16 hidden layers only where the CPU has them natively: emulated they run >10x slower (pathrl-train warns)
+    res["bfloat16_over_float32_layer"] = slow = bfloat16_slowdown()
+    hidden = "bfloat16" if slow <= 1.5 else "float32"
     with limit_code(modes[0]):
         its = 1 if quick else 4
         for robot in ("iiwa7", "armar4_legs"):  # as pathrl-train runs: 2 threads, hidden layers in bfloat16
-            res[f"ppo_iteration_{robot}"] = bench_ppo_iteration(robot, n, its)
+            res[f"ppo_iteration_{robot}"] = bench_ppo_iteration(robot, n, its, hidden_dtype=hidden)
         # float32 hidden layers, 2 threads and 1 thread: what the bfloat16 hidden layers and the threads buy
-        res["ppo_iteration_iiwa7_float32"] = bench_ppo_iteration("iiwa7", n, its, hidden_dtype="float32")
+        if hidden == "bfloat16":
+            res["ppo_iteration_iiwa7_float32"] = bench_ppo_iteration("iiwa7", n, its, hidden_dtype="float32")
         res["ppo_iteration_iiwa7_float32_1thread"] = bench_ppo_iteration("iiwa7", n, its, 1, "float32")
     res["physics_ball_on_plate"] = bench_physics("ball_on_plate", sec)
     res["physics_armar4_standing"] = bench_physics("armar4_standing", sec)
@@ -373,6 +382,9 @@ def _print(res: dict, out: Path) -> None:
                   f"{e['env_steps_per_s']:,.0f} steps/s")
     t.add_row("single-env reference iiwa7", f"{res['reference_iiwa7']['env_steps_per_s']:,.0f} steps/s")
     t.add_row("batched / reference (iiwa7)", f"{res['batched_over_reference_iiwa7']:,.0f} x")
+    if res["bfloat16_over_float32_layer"] > 1.5:
+        t.add_row("bfloat16 hidden layers: emulated on this CPU, not timed",
+                  f"{res['bfloat16_over_float32_layer']:.0f} x float32")
     for key in sorted(k for k in res if k.startswith("ppo_iteration_")):
         p = res[key]
         share = ", ".join(f"{k} {100 * v:.0f} %" for k, v in p["share"].items())

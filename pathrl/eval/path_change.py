@@ -9,10 +9,12 @@ velocity and acceleration; the policy sees the new path from its next decision o
 
 - ``replan_ms``: wall time of the switch (building the new path) plus the first decision after it;
 - the step deviation (weighted joint distance to the reference, the env's ``dev_max``) after the switch, and
-  ``settle_s``: the time from the switch until it is back at the policy's normal tracking level
-  (:func:`tracking_level`, the 95th percentile on unchanged paths) after its largest excursion, and the settle
-  time against the control (:func:`settle_vs_control`): the same change with offset 0 (the path replaced by
-  itself), which takes the path's own turns out of the window;
+  ``settle_in_band_s``: the time from the switch until it is, for the rest of the path, inside the policy's
+  normal tracking band (:func:`peak_band`: the 95th percentile of the largest deviation per unchanged path, the
+  same policy on the same test paths); two stricter readings kept beside it: ``settle_s``, back at the 95th
+  percentile of the step deviation on unchanged paths (:func:`tracking_level`) after its largest excursion in
+  the first 4 s, which the path's own turns also trip, and the settle time against the control
+  (:func:`settle_vs_control`): the same change with offset 0 (the path replaced by itself) as the bound;
 - ``duration_s``: from the switch to rest at B's end; every setpoint is checked against the position,
   velocity, acceleration and jerk limits.
 
@@ -36,7 +38,8 @@ from pathrl.limits.feasible import JointLimits
 from pathrl.paths.spline import knot_arc_lengths
 
 __all__ = ["OFFSET_RAD", "RAMP_RAD", "SWITCH_RANGE", "VARIANTS", "SwitchEpisode", "branch", "excess_vs_control", "main",
-           "paired_settle", "path_change_episodes", "settle_vs_control", "summarize", "toppra_replan", "tracking_level"]
+           "paired_settle", "path_change_episodes", "peak_band", "settle_vs_control", "summarize", "toppra_replan",
+           "tracking_level", "unchanged_deviation"]
 
 #: Defaults of the protocol: switch time (s), offset of the branch (rad, joint space), its ramp (rad of arc).
 SWITCH_RANGE = (1.0, 4.0)
@@ -68,6 +71,12 @@ class SwitchEpisode:
             return 0.0
         back = np.nonzero(dev[peak:] <= level)[0]
         return float((peak + back[0]) * dt) if len(back) else float("inf")
+
+    def settle_in_band_s(self, band: float, dt: float) -> float:
+        """Time from the switch after which every step deviation up to the end of the path is at or below `band`
+        (0 if it never exceeds it)."""
+        above = np.nonzero(np.asarray(self.dev_after) > band)[0]
+        return float((above[-1] + 1) * dt) if len(above) else 0.0
 
 
 def _control_bound(dev: np.ndarray, control: np.ndarray, level: float, dt: float, window_s: float,
@@ -161,13 +170,28 @@ def _violations(follower: Follower, start: tuple[np.ndarray, ...], setpoints: li
     return int(limit_violations(t(p), t(v), t(a), lim, 1.0 / follower.env_cfg.control_rate)["total"])
 
 
-def tracking_level(follower: Follower, knots: list[np.ndarray], episodes: int, quantile: float = 0.95) -> float:
-    """The `quantile` of the policy's step deviation (dev_max, rad) on whole paths without a change."""
-    devs: list[float] = []
+def unchanged_deviation(follower: Follower, knots: list[np.ndarray], episodes: int, max_s: float = 60.0
+                        ) -> list[np.ndarray]:
+    """Step deviation (dev_max, rad; one array per episode) of the policy on `episodes` whole paths without a
+    change."""
+    out = []
     for i in range(episodes):
+        devs: list[float] = []
         follower.reset(knots[i % len(knots)])
-        _run(follower, 600, [], devs)
-    return float(np.quantile(devs, quantile))
+        _run(follower, int(max_s / follower.env_cfg.dt), [], devs)
+        out.append(np.asarray(devs))
+    return out
+
+
+def tracking_level(unchanged: list[np.ndarray], quantile: float = 0.95) -> float:
+    """The `quantile` of the step deviation over all steps of `unchanged` (:func:`unchanged_deviation`)."""
+    return float(np.quantile(np.concatenate(unchanged), quantile))
+
+
+def peak_band(unchanged: list[np.ndarray], quantile: float = 0.95) -> float:
+    """The `quantile` of the largest step deviation per path of `unchanged` (:func:`unchanged_deviation`): the
+    band the policy keeps on that share of whole paths without a change."""
+    return float(np.quantile([d.max() for d in unchanged], quantile))
 
 
 def path_change_episodes(follower: Follower, knots: list[np.ndarray], episodes: int, seed: int = 0,
@@ -253,11 +277,12 @@ def _finite(x: float) -> float | None:
     return float(x) if np.isfinite(x) else None
 
 
-def summarize(episodes: list[SwitchEpisode], replans: list[dict], level: float, dt: float,
+def summarize(episodes: list[SwitchEpisode], replans: list[dict], level: float, band: float, dt: float,
               control: list[SwitchEpisode] | None = None) -> dict:
     """Aggregate of :func:`path_change_episodes` and :func:`toppra_replan` on the same changes; with `control` (the
     same changes with offset 0) also the settle time against it (:func:`settle_vs_control`)."""
     settle = np.array([e.settle_s(level, dt) for e in episodes])
+    in_band = np.array([e.settle_in_band_s(band, dt) for e in episodes])
     paired = {}
     if control is not None:
         vs, excess = (np.array(x) for x in paired_settle(episodes, control, level, dt))
@@ -278,6 +303,10 @@ def summarize(episodes: list[SwitchEpisode], replans: list[dict], level: float, 
         "dev_peak_rad_median": float(np.median(peak)), "dev_peak_rad_p95": float(np.quantile(peak, 0.95)),
         "settle_s_median": _finite(np.median(settle)), "settle_s_p95": _finite(np.quantile(settle, 0.95)),
         "settled_within_2s_pct": float(100 * np.mean(settle <= 2.0)),
+        "settle_band_rad": band, "settled_in_band_within_2s_pct": float(100 * np.mean(in_band <= 2.0)),
+        "left_band_pct": float(100 * np.mean(in_band > 0.0)),
+        "settle_in_band_s_median": float(np.median(in_band)), "settle_in_band_s_p95": float(np.quantile(in_band, 0.95)),
+        "settle_in_band_s_hist": {f"<={b:g}": int(np.sum(in_band <= b)) for b in (0.0, 0.5, 1.0, 2.0, 4.0)},
         "duration_after_switch_s": float(learned.mean()), "reached_end_pct": float(100 * np.mean(
             [e.reached_end for e in episodes])),
         "limit_violations": int(sum(e.violations for e in episodes)),
@@ -307,7 +336,8 @@ def main(argv: list[str] | None = None) -> None:
     torch.set_num_threads(1)
     follower = Follower.load(args.model)
     knots = load_dataset(args.dataset, follower.robot).splits["test"].knots
-    level = tracking_level(follower, knots, args.episodes)
+    unchanged = unchanged_deviation(follower, knots, args.episodes)
+    level, band = tracking_level(unchanged), peak_band(unchanged)
     dt = follower.env_cfg.dt
     res: dict = {"model": args.model, "dataset": args.dataset, "seed": args.seed, "switch_range_s": SWITCH_RANGE,
                  "variants": {}}
@@ -316,8 +346,9 @@ def main(argv: list[str] | None = None) -> None:
         episodes = path_change_episodes(follower, knots, args.episodes, args.seed, offset_rad=offset, ramp_rad=ramp)
         replans = toppra_replan(follower, knots, args.episodes, args.seed, offset_rad=offset, ramp_rad=ramp)
         res["variants"][name] = {"offset_rad": offset, "ramp_rad": ramp,
-                                 **summarize(episodes, replans, level, dt, control),
-                                 "settle_s": [_finite(e.settle_s(level, dt)) for e in episodes]}
+                                 **summarize(episodes, replans, level, band, dt, control),
+                                 "settle_s": [_finite(e.settle_s(level, dt)) for e in episodes],
+                                 "settle_in_band_s": [e.settle_in_band_s(band, dt) for e in episodes]}
         if control is not None:
             vs, excess = paired_settle(episodes, control, level, dt)
             res["variants"][name].update(settle_vs_control_s=vs, excess_after_2s_rad=excess)
