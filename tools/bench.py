@@ -329,14 +329,14 @@ def main() -> None:
     res["reference_iiwa7"] = bench_reference("iiwa7", sec)
     ref_rate = res["reference_iiwa7"]["env_steps_per_s"]
     res["batched_over_reference_iiwa7"] = res[main_key]["env_steps_per_s"] / ref_rate
-    from pathrl.policy.models import bfloat16_slowdown
+    from pathrl.policy.models import BFLOAT16_EMULATED, bfloat16_slowdown
 
     # bfloat16 hidden layers only where the CPU has them natively: emulated they run >10x slower (pathrl-train warns)
-    res["bfloat16_over_float32_layer"] = slow = bfloat16_slowdown()
-    hidden = "bfloat16" if slow <= 1.5 else "float32"
+    res["bfloat16_over_float32_layer"] = bfloat16_slowdown()
+    hidden = "float32" if res["bfloat16_over_float32_layer"] > BFLOAT16_EMULATED else "bfloat16"
     with limit_code(modes[0]):
         its = 1 if quick else 4
-        for robot in ("iiwa7", "armar4_legs"):  # as pathrl-train runs: 2 threads, hidden layers in bfloat16
+        for robot in ("iiwa7", "armar4_legs"):  # as pathrl-train runs: 2 threads, the default bfloat16 where native
             res[f"ppo_iteration_{robot}"] = bench_ppo_iteration(robot, n, its, hidden_dtype=hidden)
         # float32 hidden layers, 2 threads and 1 thread: what the bfloat16 hidden layers and the threads buy
         if hidden == "bfloat16":
@@ -382,7 +382,7 @@ def _print(res: dict, out: Path) -> None:
                   f"{e['env_steps_per_s']:,.0f} steps/s")
     t.add_row("single-env reference iiwa7", f"{res['reference_iiwa7']['env_steps_per_s']:,.0f} steps/s")
     t.add_row("batched / reference (iiwa7)", f"{res['batched_over_reference_iiwa7']:,.0f} x")
-    if res["bfloat16_over_float32_layer"] > 1.5:
+    if res["ppo_iteration_iiwa7"]["hidden_dtype"] == "float32":  # main() found bfloat16 emulated
         t.add_row("bfloat16 hidden layers: emulated on this CPU, not timed",
                   f"{res['bfloat16_over_float32_layer']:.0f} x float32")
     for key in sorted(k for k in res if k.startswith("ppo_iteration_")):

@@ -26,7 +26,8 @@ from rsl_rl.models import MLPModel
 from rsl_rl.modules import MLP
 from torch import nn
 
-__all__ = ["HIDDEN_DTYPES", "MixedMLP", "MixedPrecisionMLPModel", "bfloat16_slowdown", "bfloat16_warning"]
+__all__ = ["BFLOAT16_EMULATED", "HIDDEN_DTYPES", "MixedMLP", "MixedPrecisionMLPModel", "bfloat16_slowdown",
+           "bfloat16_warning"]
 
 
 HIDDEN_DTYPES = {"bfloat16": torch.bfloat16, "float32": torch.float32}
@@ -64,6 +65,10 @@ class MixedPrecisionMLPModel(MLPModel):
         self.mlp = MixedMLP(*self.mlp, dtype=HIDDEN_DTYPES[hidden_dtype])
 
 
+#: A :func:`bfloat16_slowdown` above this: the CPU emulates bfloat16 (native: ~0.5; emulated: 10 or more).
+BFLOAT16_EMULATED = 1.5
+
+
 def bfloat16_slowdown(rows: int = 4096, reps: int = 3) -> float:
     """Wall time of a (rows, 256) -> 128 linear layer under bfloat16 autocast over the same in float32 on this CPU
     (best of `reps` after a warm-up): about 0.5 with native bfloat16, 10 or more where torch emulates it."""
@@ -81,7 +86,8 @@ def bfloat16_slowdown(rows: int = 4096, reps: int = 3) -> float:
     return best(torch.bfloat16) / max(best(torch.float32), 1e-9)
 
 
-def bfloat16_warning(agent: Mapping[str, Any], slowdown: float | None = None, limit: float = 1.5) -> str | None:
+def bfloat16_warning(agent: Mapping[str, Any], slowdown: float | None = None, limit: float = BFLOAT16_EMULATED
+                     ) -> str | None:
     """One line for a run whose actor or critic (``agent.<role>.hidden_dtype``) asks for bfloat16 on a CPU where it is
     more than `limit` times slower than float32 (`slowdown`: measured by :func:`bfloat16_slowdown` when None)."""
     roles = [r for r in ("actor", "critic", "student", "teacher")

@@ -209,8 +209,8 @@ def _path_change(results: dict[str, Any]) -> tuple[list[str], list[list[str]]]:
              "", "| row | episodes | re-plan (ms) mean / max | peak deviation (rad) median / p95 | band (rad) | "
              "settled within 2 s (%) | settle (s) median / p95 | left the band (%) | at the step level: settled within "
              "2 s (%) | against the control: settled within 2 s (%) | excess after 2 s (rad) median / p95 | change to "
-             "rest (s) | TOPP-RA brake + re-plan (s) | learned / TOPP-RA | TOPP-RA solve (ms) | TOPP-RA from motion (%) "
-             "| limit violations (learned / TOPP-RA) |",
+             "rest (s) | TOPP-RA brake + re-plan (s) | learned / TOPP-RA | TOPP-RA solve (ms) | TOPP-RA from motion "
+             "(%) | limit violations (learned / TOPP-RA) |",
              "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     csv_rows: list[list[str]] = []
     for key, _, _ in PATH_CHANGE:
