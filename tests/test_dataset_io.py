@@ -12,11 +12,11 @@ from pathrl.dataset.io import (
     FORMAT,
     DatasetError,
     apply_strategy,
-    dataset_stats,
     load_dataset,
     load_pathset,
     save_dataset,
 )
+from pathrl.dataset.stats import dataset_stats
 from pathrl.paths.knots import KnotStrategy
 from pathrl.robot.model import load_robot_by_name
 

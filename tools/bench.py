@@ -23,6 +23,7 @@ import contextlib
 import os
 import platform
 import time
+from dataclasses import asdict
 from pathlib import Path
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
@@ -31,6 +32,7 @@ import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
 from pathrl import native  # noqa: E402
+from pathrl.deploy.fuzz import fuzz_follower  # noqa: E402
 from pathrl.envs.rewards import build_reward_terms  # noqa: E402
 from pathrl.envs.tracking import PathTrackingEnv, TrackingEnvCfg  # noqa: E402
 from pathrl.eval.limit_fuzz import fuzz_env, fuzz_report  # noqa: E402
@@ -319,6 +321,8 @@ def main() -> None:
     for model, dataset in (("models/iiwa7_random", "datasets/iiwa7/random"),
                            ("models/armar6_random", "datasets/armar6/random")):
         res[f"follower_{Path(model).name}"] = bench_follower(model, dataset, 100 if quick else 400)
+    # the follower under adversarial paths, path changes, stops and bad measured states (pathrl.deploy.fuzz)
+    res["follower_fuzz_iiwa7_random"] = asdict(fuzz_follower(ROOT / "models" / "iiwa7_random", 10 if quick else 300))
     from pathrl.eval.trueadapt_realtime import measure as adapt_decision  # TrueAdapt: policy + valid range, 50 ms
     from pathrl.repro import trueadapt as adapt
 
@@ -403,10 +407,15 @@ def _print(res: dict, out: Path) -> None:
         d = res[k]
         t.add_row(f"policy + limits per decision, {d['robot']}, limits {d['limits']}",
                   f"{d['mean_ms']:.2f} ms (max {d['max_pct_of_step']:.1f} % of 0.1 s)")
-    for k in sorted(k for k in res if k.startswith("follower_")):
+    for k in sorted(k for k in res if k.startswith("follower_") and "decisions" in res[k]):
         d = res[k]
         t.add_row(f"pathrl.deploy.Follower.decide, {d['model']}, 1 thread",
                   f"{d['mean_ms']:.2f} ms mean (p99 {d['p99_ms']:.2f}, max {d['max_ms']:.2f})")
+    f = res["follower_fuzz_iiwa7_random"]
+    t.add_row(f"Follower fuzz, {Path(f['model']).name}: {f['trials']} adversarial paths ({f['refused']} refused "
+              f"unclipped, all followed clipped), {f['path_changes']} path changes, {f['stops']} stops, "
+              f"{f['bad_states_refused']} bad states refused, {f['crashes']} crashes",
+              f"{f['violations']} violations in {f['setpoints_checked']:,} setpoint values")
     d = res["trueadapt_decision"]
     t.add_row(f"TrueAdapt decision (policy + valid range + setpoints), {Path(d['model']).name}, 1 thread",
               f"{d['decision_ms_mean']:.2f} ms mean (max {d['decision_ms_max']:.2f}; valid range max "

@@ -31,15 +31,16 @@ import os
 import shutil
 import sys
 import tempfile
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from pathrl.dataset.limits import limit_excess
-from pathrl.paths.spline import PathError, dedupe_knots, knot_arc_lengths
+from pathrl.dataset.limits import LIMIT_TOL, limit_excess
+from pathrl.dataset.stats import dataset_stats
+from pathrl.paths.spline import PathError, dedupe_knots
 from pathrl.storage import atomic_write
 
 if TYPE_CHECKING:
@@ -48,8 +49,8 @@ if TYPE_CHECKING:
     from pathrl.robot.model import RobotSpec
 
 __all__ = ["CACHE_DIR", "Dataset", "DatasetError", "FORMAT", "OUT_OF_LIMITS", "Split", "apply_strategy", "cache_path",
-           "check_destination", "check_limits", "content_hash", "dataset_stats", "load_dataset", "load_pathset", "pack",
-           "path_lengths_and_gaps", "read_cache", "save_dataset", "strategy_key", "unpack", "write_cache"]
+           "check_destination", "check_limits", "content_hash", "load_dataset", "load_pathset", "pack",
+           "read_cache", "save_dataset", "strategy_key", "unpack", "write_cache"]
 
 FORMAT = "pathrl-dataset/1"
 META_FILE = "dataset.json"
@@ -139,36 +140,6 @@ def content_hash(split_arrays: Mapping[str, Mapping[str, np.ndarray]]) -> str:
         h.update(offsets.tobytes())
         h.update(knots.tobytes())
     return h.hexdigest()
-
-
-# ----------------------------------------------------------------------------------------------------
-# statistics
-
-
-def path_lengths_and_gaps(knots_list: Iterable[np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per path: number of knots, arc length, largest arc length between consecutive knots."""
-    counts, lengths, gaps = [], [], []
-    for k in knots_list:
-        k = dedupe_knots(k)
-        s, length = knot_arc_lengths(k)
-        s[-1] = length
-        counts.append(k.shape[0])
-        lengths.append(length)
-        gaps.append(float(np.max(np.diff(s))))
-    return np.asarray(counts), np.asarray(lengths), np.asarray(gaps)
-
-
-def dataset_stats(knots_list: Sequence[np.ndarray]) -> dict[str, Any]:
-    """count, knots min/mean/max, length (rad) min/mean/max, largest knot gap (rad, arc length)."""
-    if not len(knots_list):
-        return {"count": 0}
-    counts, lengths, gaps = path_lengths_and_gaps(knots_list)
-    return {
-        "count": len(counts),
-        "knots": {"min": int(counts.min()), "mean": float(counts.mean()), "max": int(counts.max())},
-        "length": {"min": float(lengths.min()), "mean": float(lengths.mean()), "max": float(lengths.max())},
-        "max_knot_gap": float(gaps.max()),
-    }
 
 
 # ----------------------------------------------------------------------------------------------------
@@ -468,7 +439,7 @@ def check_limits(dataset: Dataset, split: str, robot: RobotSpec, out_of_limits: 
             f"{robot.name!r}'s position limits (by up to {1e3 * ex['max_excess_rad']:.3g} mrad, joint {ex['joint']})")
     if out_of_limits == "refuse":
         raise DatasetError(f"{what}; pass dataset.out_of_limits=clip to clip their knots into the limits")
-    print(f"warning: {what}; their knots are clipped into the limits", file=sys.stderr)
+    print(f"warning: {what}; their splines are clipped into the limits", file=sys.stderr)
     return True
 
 
@@ -482,6 +453,7 @@ def load_pathset(
 ) -> PathSet:
     """Load one split, apply the knot strategy (cached) and tabulate it as a PathSet. With a `robot`, paths that
     leave its position limits are refused or clipped (`out_of_limits`, :func:`check_limits`)."""
+    from pathrl.paths.inside import PathOutsideError, keep_inside
     from pathrl.paths.pathset import build_pathset
 
     dataset = path if isinstance(path, Dataset) else load_dataset(path, robot)
@@ -493,7 +465,12 @@ def load_pathset(
         raise DatasetError(f"{dataset.path / (split + '.npz')}: split {split!r} is empty")
     clip = robot is not None and check_limits(dataset, split, robot, out_of_limits)
     resampled = apply_strategy(dataset, split, knots)
-    if clip:
-        lim = robot.pos_limits[robot.path_index]
-        resampled = [np.clip(k, lim[:, 0], lim[:, 1]) for k in resampled]
-    return build_pathset(resampled, dataset.splits[split].names, table_step=table_step)
+    paths = build_pathset(resampled, dataset.splits[split].names, table_step=table_step)
+    if robot is None:
+        return paths
+    lim = robot.pos_limits[robot.path_index]
+    try:  # the spline between clipped (or even inside) knots can still leave the range: what the env starts from
+        return keep_inside(paths, resampled, lim[:, 0], lim[:, 1], clip=clip, tol=0.0 if clip else LIMIT_TOL)
+    except PathOutsideError as exc:
+        raise DatasetError(f"{dataset.path}: split {split!r}, robot {robot.name!r}, knots {strategy_key(knots)}: "
+                           f"{exc}; pass dataset.out_of_limits=clip to clip them into the limits") from None

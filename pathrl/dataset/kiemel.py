@@ -23,7 +23,8 @@ from typing import Any
 import numpy as np
 from scipy.interpolate import BSpline
 
-from pathrl.dataset.io import Dataset, DatasetError, check_destination, dataset_stats, save_dataset
+from pathrl.dataset.io import Dataset, DatasetError, check_destination, save_dataset
+from pathrl.dataset.stats import dataset_stats
 from pathrl.robot.model import RobotSpec
 
 __all__ = ["find_spline_config", "import_kiemel", "read_episode"]

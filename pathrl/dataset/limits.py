@@ -7,13 +7,15 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from pathrl.paths.inside import INSIDE_TOL
+
 if TYPE_CHECKING:
     from pathrl.robot.model import RobotSpec
 
 __all__ = ["LIMIT_TOL", "limit_excess"]
 
 #: Knots may leave the robot's position range by this much (rad) and still count as inside it (rounding).
-LIMIT_TOL = 1e-6
+LIMIT_TOL = INSIDE_TOL
 
 
 def limit_excess(knots_list: Sequence[np.ndarray], robot: RobotSpec) -> dict[str, Any]:

@@ -40,7 +40,8 @@ import numpy as np
 import torch
 from scipy.interpolate import CubicSpline, make_interp_spline
 
-from pathrl.dataset.io import DatasetError, check_destination, dataset_stats, load_dataset, save_dataset
+from pathrl.dataset.io import DatasetError, check_destination, load_dataset, save_dataset
+from pathrl.dataset.stats import dataset_stats
 from pathrl.robot.model import RobotSpec, load_robot
 
 __all__ = [

@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from pathrl.dataset.io import OUT_OF_LIMITS
 from pathrl.envs.registry import EVAL_ENV, get_task
 from pathrl.envs.rewards import build_reward_terms
 from pathrl.envs.tracking import PathTrackingEnv
@@ -29,6 +30,7 @@ from pathrl.envs.tracking_cfg import TrackingEnvCfg
 from pathrl.eval.evaluate import load_policy, load_run
 from pathrl.limits.braking import is_stopped
 from pathrl.limits.integrate import interpolate_step
+from pathrl.paths.inside import INSIDE_TOL, PathOutsideError, clip_spline_into, table_excess
 from pathrl.paths.knots import KnotStrategy
 from pathrl.paths.pathset import PathSet, build_pathset
 from pathrl.paths.segments import full_segments
@@ -56,16 +58,24 @@ class Setpoints:
 
 
 class Follower:
-    """A shipped policy following one path at a time (module docstring)."""
+    """A shipped policy following one path at a time (module docstring).
 
-    def __init__(self, cfg: dict, checkpoint: Path, knot_gap: float, robot: RobotSpec):
+    A path that leaves the robot's position range (at a knot or on the spline between knots) is refused with a
+    :class:`FollowerError` (``out_of_limits="refuse"``, the default) or clipped into it (``"clip"``: the knots are
+    moved until the whole spline is inside). Every error of the follower is a :class:`FollowerError`; a failed
+    :meth:`reset` or :meth:`replace_path` leaves the follower as it was.
+    """
+
+    def __init__(self, cfg: dict, checkpoint: Path, knot_gap: float, robot: RobotSpec, out_of_limits: str = "refuse"):
+        if out_of_limits not in OUT_OF_LIMITS:
+            raise FollowerError(f"out_of_limits must be one of {list(OUT_OF_LIMITS)}, got {out_of_limits!r}")
         try:
             feedback = get_task(cfg).feedback
         except ValueError as exc:
             raise FollowerError(str(exc)) from None
         if feedback is not None:
             raise FollowerError(f"the follower runs path-tracking policies; this one needs the {feedback} sensor")
-        self.robot, self.cfg, self.checkpoint = robot, cfg, checkpoint
+        self.robot, self.cfg, self.checkpoint, self.out_of_limits = robot, cfg, checkpoint, out_of_limits
         self.knots = KnotStrategy.from_cfg(cfg["knots"])
         self.env_cfg = replace(TrackingEnvCfg.from_run(cfg, num_envs=1, seed=0, knot_gap_norm=knot_gap), **EVAL_ENV)
         self.env: PathTrackingEnv | None = None
@@ -75,7 +85,7 @@ class Follower:
         self.setpoints_per_decision = int(steps)
 
     @classmethod
-    def load(cls, model_dir: str | os.PathLike) -> Follower:
+    def load(cls, model_dir: str | os.PathLike, out_of_limits: str = "refuse") -> Follower:
         """The policy of a model or run directory (``config.yaml`` + ``model.pt``, loaded weights only)."""
         from pathrl.eval.evaluate import RunError
 
@@ -87,36 +97,82 @@ class Follower:
             raise FollowerError(f"{model_dir}: a model-based controller, not a policy")
         if "knot_gap_norm" not in summary:
             raise FollowerError(f"{model_dir}/summary.json: no knot_gap_norm (the state's length scale)")
-        return cls(cfg, ckpt, float(summary["knot_gap_norm"]), load_robot(cfg["robot"]))
+        try:
+            robot = load_robot(cfg["robot"])
+        except (KeyError, TypeError, ValueError) as exc:
+            raise FollowerError(f"{model_dir}/config.yaml: robot: {exc}") from None
+        return cls(cfg, ckpt, float(summary["knot_gap_norm"]), robot, out_of_limits)
 
     # ------------------------------------------------------------------ paths
     def _pathset(self, knots: np.ndarray) -> PathSet:
-        knots = np.asarray(knots, dtype=np.float64)
+        """The path through `knots` (K, M) as the env follows it, inside the robot's position range (refused or
+        clipped), or a FollowerError; nothing of the follower changes."""
+        try:
+            knots = np.asarray(knots, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise FollowerError("path knots must be a (K, M) array of numbers") from None
         m = self.robot.path_dof
         if knots.ndim != 2 or knots.shape[1] != m or len(knots) < 2:
             raise FollowerError(f"path knots must be (K >= 2, {m}), got {knots.shape}")
         if not np.isfinite(knots).all():
             raise FollowerError("path knots must be finite")
-        return build_pathset([self.knots.apply(knots)], ["path"])
+        try:
+            resampled = self.knots.apply(knots)
+            paths = build_pathset([resampled], ["path"])
+        except ValueError as exc:
+            raise FollowerError(f"path knots: {exc}") from None
+        lim = self.robot.pos_limits[self.robot.path_index]
+        excess = float(table_excess(paths, torch.as_tensor(lim[:, 0]), torch.as_tensor(lim[:, 1]))[0])
+        if excess <= (INSIDE_TOL if self.out_of_limits == "refuse" else 0.0):
+            return paths
+        if self.out_of_limits == "refuse":
+            raise FollowerError(f"the path leaves robot {self.robot.name}'s position range by up to "
+                                f"{1e3 * excess:.3g} mrad (at or between its knots); refused (out_of_limits='clip' "
+                                "clips it)")
+        try:
+            return build_pathset([clip_spline_into(resampled, lim[:, 0], lim[:, 1], paths.table_step)], ["path"])
+        except PathOutsideError as exc:
+            raise FollowerError(str(exc)) from None
+
+    def _measured(self, q: np.ndarray) -> np.ndarray:
+        """The robot's measured joint positions (D,) as float64, or a FollowerError."""
+        try:
+            q = np.asarray(q, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise FollowerError("q must be the robot's joint positions, an array of numbers") from None
+        if q.shape != (self.robot.dof,):
+            raise FollowerError(f"q must have shape ({self.robot.dof},) (the robot's joints), got {q.shape}")
+        if not np.isfinite(q).all():
+            raise FollowerError("q must be finite (a NaN or inf in the robot's joint positions)")
+        return q
 
     def reset(self, knots: np.ndarray, q: np.ndarray | None = None) -> None:
-        """Start following the path through `knots` (K, M) from rest at its first knot. `q` (D,), if given, is
-        the robot's position: it must be within START_TOLERANCE of the first knot (path joints)."""
+        """Start following the path through `knots` (K, M) from rest at its first point. `q` (D,), if given, is
+        the robot's measured position: it must be within START_TOLERANCE of the path's start (path joints)."""
         paths = self._pathset(knots)
+        if q is not None:
+            idx = self.robot.path_index
+            gap = float(np.linalg.norm(self._measured(q)[idx] - paths.table[0, 0].numpy()))
+            if gap > START_TOLERANCE:
+                raise FollowerError(f"the robot is {gap:.3f} rad from the path's first knot (at most "
+                                    f"{START_TOLERANCE}); start the path where the robot is")
         if self.env is None:
-            terms = build_reward_terms(self.cfg["reward"]["terms"])
-            self.env = PathTrackingEnv(self.env_cfg, self.robot, paths, terms)
-            self.policy = load_policy(self.cfg, self.env, self.checkpoint)
+            self.env, self.policy = self._build(paths)
         else:
             self.env.set_paths(paths)
         first = torch.zeros(1, dtype=torch.long)
         self.env.start_segments(first, full_segments(paths, first))
-        if q is not None:
-            gap = self._distance(np.asarray(q, dtype=np.float64), self.env.pos[0].numpy())
-            if gap > START_TOLERANCE:
-                raise FollowerError(f"the robot is {gap:.3f} rad from the path's first knot (at most "
-                                    f"{START_TOLERANCE}); start the path where the robot is")
         self._stopping = False
+
+    def _build(self, paths: PathSet) -> tuple[PathTrackingEnv, torch.nn.Module]:
+        """The one-env env on `paths` and the policy, or a FollowerError."""
+        from pathrl.eval.evaluate import RunError
+
+        try:
+            env = PathTrackingEnv(self.env_cfg, self.robot, paths, build_reward_terms(self.cfg["reward"]["terms"]))
+            return env, load_policy(self.cfg, env, self.checkpoint)
+        except (RunError, KeyError, ValueError) as exc:
+            raise FollowerError(f"{self.checkpoint}: {exc}") from None
 
     def replace_path(self, knots: np.ndarray) -> float:
         """Follow the path through `knots` (K, M) from now on, from its point nearest to the robot; the robot
@@ -141,6 +197,11 @@ class Follower:
         p0, v0, a0 = env.pos.clone(), env.vel.clone(), env.acc.clone()
         with torch.inference_mode():
             action = self.policy(env.get_observations())
+        if not bool(torch.isfinite(action).all()):
+            if not bool(env.braking[0]):
+                raise FollowerError("the policy returned a non-finite action; nothing was sent (stop() brakes "
+                                    "without the policy)")
+            action = torch.zeros_like(action)  # braking: the env's law, not the action, sets the acceleration
         env.step(action)
         p, v, a = interpolate_step(p0, v0, a0, env.acc, env.cfg.dt, self.setpoints_per_decision)
         return Setpoints(p[0].numpy(), v[0].numpy(), a[0].numpy())
@@ -174,8 +235,3 @@ class Follower:
             raise FollowerError("call reset(knots) first")
         return self.env
 
-    def _distance(self, q: np.ndarray, start: np.ndarray) -> float:
-        if q.shape != start.shape:
-            raise FollowerError(f"q must have {start.shape[0]} joints, got {q.shape}")
-        idx = self.env.path_index.numpy()
-        return float(np.linalg.norm(q[idx] - start[idx]))

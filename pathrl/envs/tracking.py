@@ -81,6 +81,7 @@ from pathrl.limits.feasible import (
 )
 from pathrl.limits.integrate import end_of_step, interpolate_step
 from pathrl.limits.kernels import kernel
+from pathrl.paths.inside import INSIDE_TOL, table_excess
 from pathrl.paths.pathset import PathSet, table_position
 from pathrl.paths.segments import Segments, full_segments, sample_segments
 from pathrl.robot.kinematics import ForwardKinematics
@@ -162,10 +163,8 @@ class PathTrackingEnv(_VecEnvBase):
         self.limits = JointLimits.from_robot(robot, device=self.device)
         self.reward_terms = reward_terms
         self.tcp_reward = "tcp_dev" in _values_read(reward_terms, feedback)
-        self.paths = paths.to(self.device)
-        if self.paths.dof != robot.path_dof:
-            raise ValueError(f"paths have {self.paths.dof} joints, robot {robot.name} has {robot.path_dof} path joints")
         self.path_index = torch.as_tensor(robot.path_index, device=self.device)
+        self.set_paths(paths)
         self.hold = torch.ones(robot.dof, dtype=torch.bool, device=self.device)  # joints mapped around 0
         self.hold[self.path_index] = False
         if cfg.free_joint_actions == "linear":
@@ -306,8 +305,16 @@ class PathTrackingEnv(_VecEnvBase):
     def set_paths(self, paths: PathSet) -> None:
         """Swap the path bank (e.g. an evaluation split). Envs keep running until they are reset."""
         if paths.dof != self.robot.path_dof:
-            raise ValueError(f"paths have {paths.dof} joints, robot has {self.robot.path_dof} path joints")
-        self.paths = paths.to(self.device)
+            raise ValueError(f"paths have {paths.dof} joints, robot {self.robot.name} has {self.robot.path_dof} "
+                             "path joints")
+        paths = paths.to(self.device)
+        pos = self.limits.pos[self.path_index]
+        excess = table_excess(paths, pos[:, 0], pos[:, 1])
+        if bool((excess > INSIDE_TOL).any()):  # an episode starts at rest on its path: it must be inside the range
+            raise ValueError(f"{int((excess > INSIDE_TOL).sum())} of {paths.num_paths} paths leave robot "
+                             f"{self.robot.name}'s position range (by up to {1e3 * float(excess.max()):.3g} mrad); "
+                             "clip them first (pathrl.paths.inside.keep_inside, dataset.out_of_limits=clip)")
+        self.paths = paths
 
     # ------------------------------------------------------------------ observation
     @env_scoped

@@ -97,12 +97,14 @@ def _place_knots(spline: BSpline, u: np.ndarray, measure: np.ndarray, spacing: f
     """Knots where the cumulative `measure` crosses 0, spacing, 2 spacing, ..., plus the end."""
     total = measure[-1]
     targets = np.arange(0.0, total, spacing)
-    if total - targets[-1] < 1e-9:
+    if len(targets) > 1 and total - targets[-1] < 1e-9:
         targets = targets[:-1]
-    targets = np.r_[targets, total]
+    targets = np.r_[0.0, targets[1:], total]
     # measure is non-decreasing; a negligible ramp makes it strictly increasing for np.interp.
     ramp = np.linspace(0.0, 1e-12 * max(total, 1.0), len(measure))
-    return spline(np.interp(targets, measure + ramp, u))
+    at = np.interp(targets, measure + ramp, u)
+    at[0], at[-1] = u[0], u[-1]  # the path's ends, also where the measure is flat (a straight path: no curvature)
+    return spline(at)
 
 
 def resample_by_distance(knots: np.ndarray, spacing: float) -> np.ndarray:

@@ -19,11 +19,11 @@ from pathrl.dataset.io import (
     Dataset,
     DatasetError,
     check_destination,
-    path_lengths_and_gaps,
     save_dataset,
     strategy_key,
     write_cache,
 )
+from pathrl.dataset.stats import path_lengths_and_gaps
 from pathrl.paths.knots import KnotStrategy
 from pathrl.robot.model import RobotSpec, load_robot
 
