@@ -225,12 +225,17 @@ def make_inputs(fix: Path) -> None:
 # running
 
 
+#: Directories a snapshot skips: Python's bytecode, and the dataset loader's cache of knot tables (``.cache``, written
+#: by any reader of a dataset: under ``make test``'s two workers another test may fill it meanwhile).
+_SKIPPED = ("__pycache__", ".cache")
+
+
 def _snapshot(roots: Sequence[Path]) -> dict[str, tuple[bool, int, int]]:
-    """Every file and directory under `roots` (``__pycache__`` excepted): (is a dir, size, mtime ns)."""
+    """Every file and directory under `roots` (:data:`_SKIPPED` excepted): (is a dir, size, mtime ns)."""
     out = {}
     for root in roots:
         for dirpath, dirnames, filenames in os.walk(root):
-            dirnames[:] = [d for d in dirnames if d != "__pycache__"]
+            dirnames[:] = [d for d in dirnames if d not in _SKIPPED]
             for name in dirnames + filenames:
                 p = os.path.join(dirpath, name)
                 st = os.lstat(p)
