@@ -117,6 +117,20 @@ def _nonmono(d):
     d["_u"][2], d["_u"][3] = d["_u"][3], d["_u"][2]
 
 
+def _huge(d):
+    """Coefficients 1e9 x: evaluated and tabulated, this path asked for a 35 TiB arc-length table (issue 50)."""
+    d["_b_spline"]["c"] = (np.asarray(d["_b_spline"]["c"]) * 1e9).tolist()
+
+
+def _long(d):
+    """Knots inside the coefficient bound, but zig-zagging 4000 times between +-50 rad: 4e5 rad of path."""
+    u = np.linspace(0.0, 1.0, 4001)
+    knots = np.zeros((4001, 7))
+    knots[:, 0] = np.where(np.arange(4001) % 2, 50.0, -50.0)
+    d["_b_spline"] = {"t": np.r_[0.0, u, 1.0].tolist(), "c": knots.tolist(), "k": 1}
+    d["_u"] = u.tolist()
+
+
 @pytest.mark.parametrize(
     "mutate, match",
     [
@@ -128,6 +142,9 @@ def _nonmono(d):
         (_nonmono, "not strictly increasing"),
         (lambda d: d.__setitem__("_u", d["_u"][:1]), "at least 2"),
         (lambda d: d["_b_spline"].__setitem__("t", d["_b_spline"]["t"][:-1]), "inconsistent B-spline"),
+        (_huge, "beyond 100 rad"),
+        (_long, "at most 1000 rad"),
+        (lambda d: d["_b_spline"].__setitem__("k", 10**9), "expected 1 to 5"),
     ],
 )
 def test_errors(tmp_path, iiwa, mutate, match):

@@ -32,8 +32,12 @@ def scalars(run_dir):
     return [m for t, _, m in read_messages(run_dir / "run.mcap") if t == "/train/scalars"]
 
 
+def _files(run_dir):
+    return {p.name: (p.read_bytes(), p.stat().st_mtime_ns) for p in run_dir.iterdir() if p.is_file()}
+
+
 def test_train_resume_and_eval(tiny_dataset, tmp_path):
-    run_dir = tmp_path / "run"
+    run_dir = tmp_path / "rün dir"  # non-ASCII and a space: quoted for Hydra's grammar by the CLI (issue 50)
     r = run(train_cmd(tiny_dataset, run_dir, 2))
     assert r.returncode == 0, r.stderr[-2000:]
     assert (run_dir / "config.yaml").is_file() and (run_dir / "model_1.pt").is_file()
@@ -49,6 +53,11 @@ def test_train_resume_and_eval(tiny_dataset, tmp_path):
     assert [m["iteration"] for m in scalars(run_dir)] == [0, 1, 2, 3]
     summary = json.loads((run_dir / "summary.json").read_text())
     assert summary["iterations"] == 4 and summary["env_steps"] == 4 * 32 * 8
+    # a resume with nothing left to do changes nothing (it used to rewrite summary.json with mean_reward null)
+    before = _files(run_dir)
+    r = run(train_cmd(tiny_dataset, run_dir, 4, "resume=true"))
+    assert r.returncode == 0 and "nothing to do, nothing changed" in r.stderr, r.stderr[-2000:]
+    assert _files(run_dir) == before and summary["mean_reward"] is not None
     # resume with a different config is refused
     r = run(train_cmd(tiny_dataset, run_dir, 5, "resume=true", "reward=balanced"))
     assert r.returncode != 0 and "different config" in r.stderr

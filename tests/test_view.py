@@ -126,6 +126,29 @@ def test_selection_by_ids_and_worst(run_dir, tmp_path):
     assert len(texts) == 1 and texts[0][0].startswith(f"### Episode {worst} ")
 
 
+def test_a_selection_never_replaces_the_full_recording(run_dir, tmp_path, capsys):
+    """``--worst N`` used to write episodes.rrd, the full recording's name, with N episodes (issue 50)."""
+    src = tmp_path / "episodes.mcap"
+    src.write_bytes((run_dir / "episodes.mcap").read_bytes())
+    assert main([str(src)]) == 0
+    full = (tmp_path / "episodes.rrd").read_bytes()
+    assert main([str(src), "--worst", "1"]) == 0 and main([str(src), "--episodes", "2,0"]) == 0
+    assert (tmp_path / "episodes.rrd").read_bytes() == full
+    assert len(column(rrd_rows(tmp_path / "episodes_worst1.rrd"), "/metrics/episode", "TextDocument:text")) == 1
+    assert len(column(rrd_rows(tmp_path / "episodes_ep2-0.rrd"), "/metrics/episode", "TextDocument:text")) == 2
+    assert "wrote " + str(tmp_path / "episodes_worst1.rrd") in capsys.readouterr().out
+
+
+def test_a_truncated_file_says_so(run_dir, tmp_path, capsys):
+    """A file cut inside its first chunk used to be reported as "no pathrl channels"."""
+    src = tmp_path / "episodes.mcap"
+    src.write_bytes((run_dir / "episodes.mcap").read_bytes()[:300])
+    assert main([str(src)]) == 2
+    err = capsys.readouterr().err
+    assert "truncated or damaged MCAP" in err and err.count("\n") == 1
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["episodes.mcap"]
+
+
 def test_jerk_progress_and_deviation(run_dir):
     robot, episodes = rv.read_episodes(run_dir / "episodes.mcap")
     e = episodes[0]

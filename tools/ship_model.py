@@ -2,7 +2,8 @@
 
 Copies the resolved config and training summary and the last checkpoint without its optimizer
 state (actor + critic weights only). Evaluate it afterwards with
-`pathrl-eval run_dir=models/<name>` (writes metrics.json there).
+`pathrl-eval run_dir=models/<name>` (writes runs/eval/<name>/metrics.json; into the model's folder only with
+`out=models/<name> write_models=true`).
 
     tools/ship_model.py runs/<experiment>/seed0 models/<experiment>
 """

@@ -19,13 +19,12 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 import time
 from pathlib import Path
 
 import torch
 
-from pathrl.cli.common import compose, to_container
+from pathrl.cli.common import ArgParser, UserError, compose, output_dir, run_cli, to_container
 from pathrl.config.schema import TrainAppCfg
 from pathrl.envs.trueadapt import build_trueadapt_env
 from pathrl.eval.evaluate import committed_split
@@ -79,8 +78,9 @@ def load(args: argparse.Namespace, num_envs: int, **overrides):
         raise
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+def parse_args(argv: list[str]) -> argparse.Namespace:
+    """The command line, checked (UserError: one line): counts >= 1, ``--out`` writable, before any work."""
+    ap = ArgParser(prog="trueadapt_eval.py", description=__doc__.split("\n\n")[0])
     ap.add_argument("--task", choices=["on_plate", "in_place"], default="on_plate", help="without --run")
     ap.add_argument("--run", type=Path, default=None, help="a run directory: evaluate its latest checkpoint")
     ap.add_argument("--dataset", default=None, help="dataset directory (default: the config's)")
@@ -95,13 +95,22 @@ def main() -> None:
     ap.add_argument("--checkpoint", type=Path, default=None, help="with --run: this checkpoint, not the latest")
     ap.add_argument("--workers", type=int, default=None, help="PyBullet worker processes (default: the config's)")
     ap.add_argument("--out", type=Path, default=None, help="also write the result to OUT/metrics.json")
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
+    for flag, value in (("--episodes", args.episodes), ("--num-envs", args.num_envs), ("--workers", args.workers)):
+        if value is not None and value < 1:
+            raise UserError(f"{flag} must be >= 1, got {value}")
+    if args.out is not None:
+        output_dir(args.out, "--out", ("metrics.json",))
+    return args
+
+
+def _main(argv: list[str]) -> None:
+    args = parse_args(argv)
     torch.set_num_threads(1)
     try:
         env, actor = load(args, min(args.num_envs, args.episodes), **({"obs_ball": False} if args.open_loop else {}))
-    except ValueError as exc:
-        raise SystemExit(f"error: {exc}") from None
-
+    except (ValueError, OSError) as exc:  # RunError, DatasetError, a bad controller or config
+        raise UserError(str(exc).splitlines()[0] if str(exc) else type(exc).__name__) from None
     policy = reference_policy if actor is None else ObservingPolicy(actor)
     traj = torch.arange(args.episodes) % env.bank.num
     limits = LimitCounter(env)
@@ -113,7 +122,7 @@ def main() -> None:
     res |= {"limit_violations": limits.counts["total"], "limit_violations_by_kind": limits.counts,
             "setpoints_checked": limits.checked, "dataset": args.resolved_dataset, "split": args.split,
             "trajectories_in_split": env.bank.num,
-            "seconds": round(time.perf_counter() - t0, 1), "command": " ".join(sys.argv)}
+            "seconds": round(time.perf_counter() - t0, 1), "command": " ".join(["tools/trueadapt_eval.py", *argv])}
     print(json.dumps(res, indent=1))
     if args.out is not None:
         from pathrl.storage import write_json_atomic
@@ -122,5 +131,10 @@ def main() -> None:
         write_json_atomic(args.out / "metrics.json", res)
 
 
+def main(argv: list[str] | None = None) -> int:
+    """Entry point (argv: sys.argv[1:]); 0, or 2 with a one-line error on stderr."""
+    return run_cli(_main, argv)
+
+
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

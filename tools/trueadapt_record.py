@@ -16,17 +16,18 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 from pathlib import Path
 
 import torch
 from trueadapt_eval import load  # the sibling tool (tools/ is on the path of a script)
 
+from pathrl.cli.common import ArgParser, UserError, output_dir, run_cli
 from pathrl.eval.trueadapt_record import FILE_NAME, record_trueadapt
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    """The command line, checked (UserError: one line): ``--episodes`` >= 1, ``--out`` writable, before any work."""
+    ap = ArgParser(prog="trueadapt_record.py", description=__doc__.split("\n\n")[0])
     src = ap.add_mutually_exclusive_group(required=True)
     src.add_argument("--run", type=Path, default=None, help="a run or model directory (its checkpoint or controller)")
     src.add_argument("--controller", default=None, help="a controller name (e.g. reference) or YAML mapping")
@@ -40,20 +41,20 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     ap.add_argument("--checkpoint", type=Path, default=None, help="with --run: this checkpoint, not the latest")
     ap.add_argument("--keep-going", action="store_true",
                     help="do not end an episode when the task fails (to see the whole trajectory)")
-    return ap.parse_args(argv)
-
-
-def main(argv: list[str] | None = None) -> int:
-    args = parse_args(argv)
+    args = ap.parse_args(argv)
     if args.episodes < 1:
-        print(f"error: --episodes must be >= 1, got {args.episodes}", file=sys.stderr)
-        return 2
+        raise UserError(f"--episodes must be >= 1, got {args.episodes}")
+    output_dir(args.out, "--out", (FILE_NAME,))
+    return args
+
+
+def _main(argv: list[str]) -> None:
+    args = parse_args(argv)
     torch.set_num_threads(1)
     try:
         env, actor = load(args, args.episodes, **({"fail_terminates": False} if args.keep_going else {}))
     except (ValueError, OSError) as exc:  # RunError, DatasetError, a bad controller or config
-        print(f"error: {str(exc).splitlines()[0]}", file=sys.stderr)
-        return 2
+        raise UserError(str(exc).splitlines()[0] if str(exc) else type(exc).__name__) from None
     try:
         out = args.out / FILE_NAME
         stats = record_trueadapt(env, actor, args.episodes, out)
@@ -61,7 +62,11 @@ def main(argv: list[str] | None = None) -> int:
         env.close()
     print(json.dumps(stats))
     print(f"wrote {out} ({out.stat().st_size / 1e6:.2f} MB); view with: pathrl-view {args.out}")
-    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point (argv: sys.argv[1:]); 0, or 2 with a one-line error on stderr."""
+    return run_cli(_main, argv)
 
 
 if __name__ == "__main__":

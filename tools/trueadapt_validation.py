@@ -17,6 +17,7 @@ from pathlib import Path
 
 import torch
 
+from pathrl.cli.common import ArgParser, UserError, output_file, run_cli
 from pathrl.eval.trueadapt_validation import MODES, trace, validate
 from pathrl.limits.feasible import JointLimits
 from pathrl.robot.model import load_robot_by_name
@@ -51,18 +52,39 @@ def plot(limits: JointLimits, joint: int, steps: int, path: Path) -> None:
     plt.close(fig)
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+def parse_args(argv: list[str]) -> argparse.Namespace:
+    """The command line, checked (UserError: one line): counts in range, ``--plot`` / ``--out`` writable, before
+    any work."""
+    ap = ArgParser(prog="trueadapt_validation.py", description=__doc__.split("\n\n")[0])
     ap.add_argument("--trajectories", type=int, default=100_000)
     ap.add_argument("--steps", type=int, default=100)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--joint", type=int, default=0, help="joint index for the plot")
     ap.add_argument("--plot", type=Path, default=None)
     ap.add_argument("--out", type=Path, default=None, help="also write the results to this JSON file")
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
+    if args.trajectories < 0:
+        raise UserError(f"--trajectories must be >= 0, got {args.trajectories}")
+    if args.steps < 1:
+        raise UserError(f"--steps must be >= 1, got {args.steps}")
+    if args.trajectories == 0 and args.plot is None:
+        raise UserError("nothing to do: --trajectories 0 without --plot")
+    if args.trajectories == 0 and args.out is not None:
+        raise UserError("--out needs --trajectories >= 1 (it records the validation's counts)")
+    for flag, path in (("--plot", args.plot), ("--out", args.out)):
+        if path is not None:
+            output_file(path, flag)
+    return args
+
+
+def _main(argv: list[str]) -> None:
+    args = parse_args(argv)
     torch.set_num_threads(1)
     limits = JointLimits.from_robot(load_robot_by_name("iiwa7"))
+    if not 0 <= args.joint < limits.dof:
+        raise UserError(f"--joint must be in 0..{limits.dof - 1} (iiwa7), got {args.joint}")
     if args.plot is not None:
+        args.plot.parent.mkdir(parents=True, exist_ok=True)
         plot(limits, args.joint, args.steps, args.plot)
     if args.trajectories > 0:
         out = [asdict(validate(limits, args.trajectories, args.steps, mode=m, seed=args.seed)) for m in MODES]
@@ -74,5 +96,10 @@ def main() -> None:
             write_json_atomic(args.out, out)
 
 
+def main(argv: list[str] | None = None) -> int:
+    """Entry point (argv: sys.argv[1:]); 0, or 2 with a one-line error on stderr."""
+    return run_cli(_main, argv)
+
+
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

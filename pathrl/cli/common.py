@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import argparse
 import dataclasses
 import re
 import sys
 import typing
 from collections.abc import Callable, Sequence
+from pathlib import Path
 from typing import Any
 
 from omegaconf import DictConfig, OmegaConf
@@ -14,13 +16,23 @@ from omegaconf import DictConfig, OmegaConf
 from pathrl.config.paths import CONF_DIR
 
 __all__ = [
-    "CONF_DIR", "UserError", "compose", "hydra_message", "key_value_app", "key_value_overrides", "quoted",
-    "reword_type_error", "run_cli", "schema_keys", "to_container",
+    "CONF_DIR", "ArgParser", "UserError", "compose", "hydra_message", "hydra_safe", "key_value_app",
+    "key_value_overrides", "output_dir", "output_file", "quoted", "reword_type_error", "run_cli", "schema_keys",
+    "to_container",
 ]
 
 
 class UserError(Exception):
     """Bad user input (argument, config, dataset, checkpoint): reported as one line, exit code 2."""
+
+
+class ArgParser(argparse.ArgumentParser):
+    """An argparse parser whose errors are a one-line UserError (exit code 2 under :func:`run_cli`) instead of the
+    usage and the message on two or more lines."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        """Raise UserError with the parser's message (and where to find the usage)."""
+        raise UserError(f"{message} (see {self.prog} --help)")
 
 
 def compose(config_name: str, overrides: Sequence[str], schema: type | None = None) -> DictConfig:
@@ -36,7 +48,7 @@ def compose(config_name: str, overrides: Sequence[str], schema: type | None = No
     register()
     try:
         with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
-            cfg = hydra_compose(config_name=config_name, overrides=list(overrides))
+            cfg = hydra_compose(config_name=config_name, overrides=hydra_safe(overrides))
         OmegaConf.resolve(cfg)
     except (HydraException, OmegaConfBaseException) as exc:
         raise UserError(f"config error: {hydra_message(exc)}") from None
@@ -52,11 +64,54 @@ def compose(config_name: str, overrides: Sequence[str], schema: type | None = No
 
 def hydra_message(exc: BaseException) -> str:
     """One line from a Hydra / OmegaConf error: its first line and the line saying why (``Key 'x' is not in
-    struct``), without the hints and the key dumps."""
+    struct``), without the hints and the key dumps; a missing group option lists every option of the group."""
     text = str(exc).strip() + ("\n" + str(exc.__cause__).strip() if exc.__cause__ is not None else "")
+    options = re.search(r"Available options in '([^']+)':\n((?:\t.*\n?)*)", text)
+    if options is not None:
+        names = [n.strip() for n in options.group(2).splitlines() if n.strip() and not n.strip().endswith("_schema")]
+        first = text.splitlines()[0].strip()
+        return f"{first}; options of {options.group(1)}: {', '.join(names)}"
     lines = [ln.strip() for ln in text.splitlines() if ln.strip()]
     keep = [ln for ln in lines if not ln.startswith(("To append", "full_key:", "reference_type", "object_type"))]
     return " ".join(keep[:2]) if keep else type(exc).__name__
+
+
+#: Characters that make a Hydra override value more than one plain string (lists, dicts, sweeps, quotes, ...).
+_GRAMMAR = set(",[]{}()'\"=:")
+
+
+def hydra_safe(overrides: Sequence[str]) -> list[str]:
+    """`overrides` with plain values that hold non-ASCII characters (``dataset.path=/data/tëst``) quoted: Hydra's
+    grammar takes unquoted values as ASCII only. Values with grammar characters (lists, sweeps, quotes) and flags
+    are left as written."""
+    out = []
+    for a in overrides:
+        key, eq, value = a.partition("=")
+        plain = eq and not a.startswith("-") and value and not (_GRAMMAR & set(value))
+        out.append(f"{key}={quoted(value)}" if plain and not value.isascii() else a)
+    return out
+
+
+def output_file(path: str | Path, what: str) -> Path:
+    """`path` as a Path if a file can be written there (:func:`pathrl.storage.check_file_destination`), checked
+    before any work; UserError (one line naming `what`) if not."""
+    from pathrl.storage import DestinationError, check_file_destination
+
+    try:
+        return check_file_destination(path, what)
+    except DestinationError as exc:
+        raise UserError(str(exc)) from None
+
+
+def output_dir(path: str | Path, what: str, files: Sequence[str] = ()) -> Path:
+    """`path` as a Path if a directory of outputs (with `files` in it) can be written there
+    (:func:`pathrl.storage.check_dir_destination`), checked before any work; UserError (one line) if not."""
+    from pathrl.storage import DestinationError, check_dir_destination
+
+    try:
+        return check_dir_destination(path, what, files)
+    except DestinationError as exc:
+        raise UserError(str(exc)) from None
 
 
 def run_cli(main: Callable[[list[str]], Any], argv: Sequence[str] | None = None) -> int:

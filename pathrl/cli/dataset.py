@@ -15,9 +15,10 @@ import json
 import sys
 import time
 from collections.abc import Mapping, Sequence
+from pathlib import Path
 from typing import Any
 
-from pathrl.cli.common import UserError, compose, run_cli, to_container
+from pathrl.cli.common import UserError, compose, output_dir, run_cli, to_container
 
 __all__ = ["cmd_generate", "cmd_import", "cmd_info", "main", "print_info", "print_limits"]
 
@@ -116,6 +117,7 @@ def cmd_generate(overrides: Sequence[str]) -> None:
     from pathrl.config.schema import DatasetAppCfg
 
     cfg = compose("dataset_app", overrides, DatasetAppCfg)
+    output_dir(str(cfg.dataset.path), "dataset.path")
     t0 = time.perf_counter()
     try:
         ds = generate_dataset(
@@ -146,6 +148,9 @@ def cmd_import(argv: Sequence[str]) -> None:
     ap.add_argument("src_dir")
     ap.add_argument("dest")
     args = ap.parse_args(list(argv))
+    if Path(args.dest).exists() and not args.overwrite:
+        raise UserError(f"{args.dest}: already exists (pass --overwrite to replace it)")
+    output_dir(args.dest, "DEST")
     t0 = time.perf_counter()
     try:
         robot = load_robot_by_name(args.robot)

@@ -1,7 +1,8 @@
 """``pathrl-eval``: evaluate a training run or a shipped model directory.
 
     pathrl-eval run_dir=models/iiwa7_random [dataset=NAME | dataset.path=DIR] [split=test]
-                [episodes=N] [segments=paper|full] [seed=0] [out=DIR] [record=true|false] [num_envs=1200]
+                [episodes=N] [segments=paper|full] [seed=0] [out=DIR] [write_models=true|false]
+                [record=true|false] [num_envs=1200]
                 [task=ball_on_plate|standing] [backend=pybullet|analytic] [compile_limits=true|false]
                 [open_loop=true|false] [checkpoint=model_K.pt] [dataset.out_of_limits=refuse|clip]
 
@@ -11,7 +12,10 @@ The arguments are Hydra overrides of ``conf/eval_app.yaml`` (schema :class:`path
 task to a run trained without one (its sensor values stay unobserved); runs with a task are simulated with
 ``backend`` (default PyBullet). ``open_loop=true`` freezes the task's sensor at its first value of each episode.
 ``checkpoint`` evaluates that checkpoint of a training run instead of its latest. ``run_dir`` may also be a
-model-based controller's directory (``models/iiwa7_ball_tray_controller``).
+model-based controller's directory (``models/iiwa7_ball_tray_controller``). ``metrics.json`` and ``episodes.mcap``
+go to ``out``, by default the run directory; a shipped model's (``models/<name>``) go to ``runs/eval/<name>``:
+nothing is written inside ``models/`` unless ``write_models=true``. The output directory is checked before the
+evaluation runs.
 """
 
 from __future__ import annotations
@@ -20,9 +24,9 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from pathrl.cli.common import UserError, compose, key_value_app, run_cli, schema_keys
+from pathrl.cli.common import UserError, compose, key_value_app, output_dir, run_cli, schema_keys
 
-__all__ = ["OFFSET_WARN_RAD", "main"]
+__all__ = ["OFFSET_WARN_RAD", "main", "output_of"]
 
 USAGE = "usage: " + " ".join(__doc__.split("\n\n")[1].split())
 
@@ -41,6 +45,9 @@ def _arguments(argv: Sequence[str]) -> list[str]:
 
 #: Keys whose value is taken as written (a path or a name), as before Hydra: ``out=/tmp/a,b`` is not a list.
 _LITERAL = ("run_dir", "dataset.name", "dataset.path", "split", "out", "checkpoint")
+
+#: Files an evaluation writes into its output directory.
+_OUTPUTS = ("metrics.json", "episodes.mcap")
 
 
 def _print_help() -> None:
@@ -83,6 +90,25 @@ def _config(argv: list[str]) -> dict[str, Any]:
     return {**cfg, "task": None if cfg["task"] is None else cfg["task"]["name"]}
 
 
+def output_of(cfg: dict[str, Any]) -> Path:
+    """Where the evaluation of `cfg` writes: ``out``, else the run directory, else (a shipped model in ``models/``)
+    ``runs/eval/<name>``; checked before any work (UserError: inside ``models/`` without ``write_models=true``,
+    a file, not writable)."""
+    from pathrl.storage import inside_models
+
+    run_dir = Path(cfg["run_dir"])
+    if cfg["out"] is not None:
+        out = Path(cfg["out"])
+    elif inside_models(run_dir):
+        out = Path("runs", "eval", run_dir.resolve().name)
+    else:
+        out = run_dir
+    if inside_models(out) and not cfg["write_models"]:
+        raise UserError(f"out={out} is inside models/ (the shipped policies); give another out= or pass "
+                        "write_models=true to write the evaluation there")
+    return output_dir(out, "out", _OUTPUTS)
+
+
 def _main(argv: list[str]) -> None:
     from pathrl.dataset.io import DatasetError
     from pathrl.eval.evaluate import RunError, evaluate, load_run
@@ -92,6 +118,7 @@ def _main(argv: list[str]) -> None:
         return
     cfg = _config(argv)
     run_dir = Path(cfg["run_dir"])
+    out = output_of(cfg)
     dataset_path = cfg["dataset"]["path"]
     if cfg["dataset"]["name"] is not None:
         try:
@@ -101,13 +128,14 @@ def _main(argv: list[str]) -> None:
         dataset_path = str(Path("data") / run_cfg["robot"]["name"] / cfg["dataset"]["name"])
     try:
         m = evaluate(run_dir, dataset_path, cfg["split"], cfg["episodes"], cfg["segments"], cfg["seed"],
-                     Path(cfg["out"]) if cfg["out"] is not None else None, num_envs=cfg["num_envs"],
+                     out, num_envs=cfg["num_envs"],
                      record=cfg["record"], task=cfg["task"], backend=cfg["backend"],
                      compile_limits=cfg["compile_limits"], open_loop=cfg["open_loop"],
                      checkpoint=cfg["checkpoint"], out_of_limits=cfg["dataset"]["out_of_limits"])
     except (RunError, DatasetError) as exc:
         raise UserError(str(exc)) from None
     _print_table(m)
+    print(f"wrote {out / 'metrics.json'}" + (f" and {out / 'episodes.mcap'}" if cfg["record"] else ""))
 
 
 def _print_table(m: dict) -> None:

@@ -2,9 +2,11 @@
 
     pathrl-export run_dir=models/iiwa7_random [out=DIR] [dataset.path=DIR] [observations=1000]
 
-Writes ``actor.pt``, ``actor.onnx`` and ``export.json`` to ``out`` (default ``<run_dir>/export``) and checks both
+Writes ``actor.pt``, ``actor.onnx`` and ``export.json`` to ``out`` (default ``<run_dir>/export``; checked before the
+export runs) and checks both
 exports against the PyTorch actor on `observations` states the policy visits on the test split (paper
-segments); ``dataset.path`` defaults to the run's dataset, else the committed ``datasets/<robot>/<dataset>``.
+segments); ``dataset.path`` defaults to the run's dataset, else the committed ``datasets/<robot>/<dataset>``. The
+policy's length scale comes from the run's ``summary.json`` (an error without it).
 The arguments are Hydra overrides of ``conf/export_app.yaml`` (schema :class:`pathrl.config.schema.ExportAppCfg`).
 """
 
@@ -14,7 +16,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-from pathrl.cli.common import UserError, compose, key_value_app, run_cli
+from pathrl.cli.common import UserError, compose, key_value_app, output_dir, run_cli
 
 __all__ = ["main"]
 
@@ -22,6 +24,9 @@ USAGE = "usage: pathrl-export run_dir=RUN [out=DIR] [dataset.path=DIR] [observat
 
 #: Keys whose value is taken as written (a path), as before Hydra: ``out=/tmp/a,b`` is not a list.
 _LITERAL = ("run_dir", "out", "dataset.path")
+
+#: Files an export writes into its output directory.
+_OUTPUTS = ("actor.pt", "actor.onnx", "export.json")
 
 
 def _print_help() -> None:
@@ -50,7 +55,7 @@ def _main(argv: list[str]) -> None:
     from pathrl.deploy.export import export_policy
     from pathrl.envs.registry import EVAL_ENV, get_task
     from pathrl.envs.tracking_cfg import TrackingEnvCfg
-    from pathrl.eval.evaluate import RunError, load_run
+    from pathrl.eval.evaluate import RunError, load_run, policy_scale
     from pathrl.paths.knots import KnotStrategy
     from pathrl.robot.model import load_robot
 
@@ -60,12 +65,14 @@ def _main(argv: list[str]) -> None:
     args = _config(argv)
     run_dir = Path(args["run_dir"])
     count = args["observations"]
+    out = output_dir(args["out"] or run_dir / "export", "out", _OUTPUTS)
     try:
         cfg, ckpt, summary = load_run(run_dir)
+        if ckpt is None:
+            raise UserError(f"{run_dir}: a model-based controller has no network to export")
+        gap = policy_scale(run_dir, summary)
     except RunError as exc:
         raise UserError(str(exc)) from None
-    if ckpt is None:
-        raise UserError(f"{run_dir}: a model-based controller has no network to export")
     try:
         feedback = get_task(cfg).feedback
     except ValueError as exc:
@@ -81,10 +88,8 @@ def _main(argv: list[str]) -> None:
         paths = load_pathset(ds, "test", KnotStrategy.from_cfg(cfg["knots"]), robot=robot)
     except (DatasetError, OSError) as exc:
         raise UserError(str(exc).splitlines()[0] if str(exc) else repr(exc)) from None
-    env_cfg = replace(TrackingEnvCfg.from_run(cfg, num_envs=min(8, paths.num_paths), seed=0,
-                                             knot_gap_norm=summary.get("knot_gap_norm")),
+    env_cfg = replace(TrackingEnvCfg.from_run(cfg, num_envs=min(8, paths.num_paths), seed=0, knot_gap_norm=gap),
                       **EVAL_ENV)
-    out = Path(args["out"] or run_dir / "export")
     try:
         report = export_policy(cfg, ckpt, paths, env_cfg, robot, out, count)
     except ValueError as exc:

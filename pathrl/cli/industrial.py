@@ -15,7 +15,8 @@
 uses it as the inner loop instead of MPGD. ``policy=feedback:G`` is the fixed error-feedback policy a = (G, 0, 0).
 
 Keys: ``conf/industrial/app.yaml`` (schema :class:`pathrl.industrial.config.IndustrialAppCfg`), e.g.
-``rows='["Type 1 Easy"]' mpgd.k_max=20 controller.noise_mm=0.05``. Outputs are written atomically.
+``rows='["Type 1 Easy"]' mpgd.k_max=20 controller.noise_mm=0.05``. Outputs are checked before the work and
+written atomically.
 """
 
 from __future__ import annotations
@@ -27,12 +28,15 @@ from pathlib import Path
 
 import numpy as np
 
-from pathrl.cli.common import UserError, compose, run_cli, to_container
+from pathrl.cli.common import UserError, compose, output_dir, output_file, run_cli, to_container
 from pathrl.storage import atomic_write
 
-__all__ = ["RECORD_KEYS", "main"]
+__all__ = ["OUTPUT_KEYS", "RECORD_KEYS", "main"]
 
 COMMANDS = ("table2", "speed", "sweep", "train", "table4", "record", "validate", "timing")
+#: The config key of each command's output file (``train`` writes ``run_dir``).
+OUTPUT_KEYS = {"table2": "out_table2", "speed": "out_speed", "sweep": "out_sweep", "table4": "out_table4",
+               "validate": "out_validation", "timing": "out_timing"}
 USAGE = "usage: pathrl-industrial {table2,speed,sweep,train,table4,record,validate,timing} [key=value ...]"
 #: keys of ``record`` only (not config keys)
 RECORD_KEYS = ("traj", "method", "out")
@@ -61,10 +65,12 @@ def _policy(run_dir: str):
     if not run_dir:
         return None, "RL"
     if run_dir.startswith("feedback:"):
+        from pathrl.industrial.config import feedback_gain
+
         try:
-            gain = float(run_dir.split(":", 1)[1])
-        except ValueError:
-            raise UserError(f"policy: expected feedback:<gain>, got {run_dir!r}") from None
+            gain = feedback_gain(run_dir)
+        except ValueError as exc:
+            raise UserError(str(exc)) from None
         return (lambda obs: np.tile([gain, 0.0, 0.0], (len(obs), 1))), f"EF({gain:g})"
     from pathrl.industrial.rl_train import load_agent
 
@@ -109,6 +115,10 @@ def _main(argv: list[str]) -> None:
     from pathrl.industrial import experiments, tables
 
     cfg, (controller, mpgd, search, rl), targets = _setup(rest)
+    if cmd == "train":
+        output_dir(cfg["run_dir"], "run_dir")
+    else:
+        output_file(cfg[OUTPUT_KEYS[cmd]], OUTPUT_KEYS[cmd])
     command = " ".join(["pathrl-industrial", *argv])
     note = ("Paper values: Wen et al., RobotStudio simulation of an ABB IRB 6640 (Table II/III); ours: the "
             "simulated controller of pathrl.industrial (a different controller, so compare trends, not digits). "
@@ -233,6 +243,7 @@ def _record(argv: Sequence[str]) -> None:
 
     own, rest = _record_keys(argv)
     cfg, (controller, mpgd, _, rl), _ = _setup(rest)
+    output_dir(own["out"], "out", ("industrial.mcap",))
     try:
         target = select_targets([own["traj"]])[0]
     except ValueError as exc:

@@ -6,7 +6,8 @@
 ``segments=full``: whole paths, one episode per path unless ``episodes`` is given (cycling over the
 paths). ``segments=paper``: the paper's random segments, 1200 episodes by default, drawn with ``seed``
 (the same plan :func:`pathrl.paths.segments.evaluation_plan` gives the policy evaluation). Writes a
-JSON summary (default ``<dataset.path>/toppra_<split>_<segments>.json``) and prints a short table.
+JSON summary (default ``<dataset.path>/toppra_<split>_<segments>.json``; checked before the solver runs) and prints a
+short table.
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from pathrl.cli.common import UserError, compose, run_cli, to_container
+from pathrl.cli.common import UserError, compose, output_file, run_cli, to_container
 from pathrl.storage import write_json_atomic
 
 __all__ = ["PAPER_EPISODES", "main", "main_", "print_summary", "summarize"]
@@ -181,6 +182,7 @@ def main_(argv: list[str]) -> dict[str, Any]:
     except (RobotConfigError, ValueError) as exc:
         raise UserError(str(exc)) from None
     data_dir = Path(str(cfg.dataset.path))
+    out = output_file(str(cfg.out) if cfg.out else data_dir / f"toppra_{cfg.split}_{segments}.json", "out")
     try:
         dataset = load_dataset(data_dir, robot)
         paths = load_pathset(dataset, str(cfg.split), knots, robot, out_of_limits=str(cfg.dataset.out_of_limits))
@@ -191,9 +193,6 @@ def main_(argv: list[str]) -> dict[str, Any]:
     else:
         episodes = paths.num_paths if segments == "full" else PAPER_EPISODES
     plan = evaluation_plan(paths, episodes, segments, int(cfg.seed))
-    out = Path(str(cfg.out)) if cfg.out else data_dir / f"toppra_{cfg.split}_{segments}.json"
-    if out.exists() and out.is_dir():
-        raise UserError(f"out={out} is a directory")
 
     from pathrl.baselines.toppra import GRID_STEP, MARGIN, solve_plan
 

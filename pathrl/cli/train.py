@@ -50,12 +50,13 @@ _NOT_A_RUN = ("-m", "--multirun", "-h", "--help", "--hydra-help", "-c", "--cfg",
               "--config-dir", "-cd")
 
 
-def _precheck(argv: list[str]) -> None:
+def _precheck(argv: list[str]) -> dict | None:
     """Compose a single run's config before Hydra does, so that a bad override or key is one line (exit 2), not
-    Hydra's multi-line report. Sweeps are checked per job (a failed job is recorded, the others run)."""
+    Hydra's multi-line report; the run directory is checked too. Returns the config (None for a sweep, help, ...:
+    sweeps are checked per job, a failed job is recorded and the others run)."""
     if any(a.split("=", 1)[0] in _NOT_A_RUN for a in argv):
-        return
-    from pathrl.cli.common import UserError, compose, to_container
+        return None
+    from pathrl.cli.common import UserError, compose, output_dir, to_container
     from pathrl.config.schema import TrainAppCfg
     from pathrl.envs.registry import check_task
     from pathrl.train.runner import check_run_cfg
@@ -64,20 +65,51 @@ def _precheck(argv: list[str]) -> None:
         cfg = to_container(compose("train", argv, TrainAppCfg))
         check_run_cfg(cfg)
         check_task(cfg)  # the task's env and reward values (pathrl.envs.registry); the dataset is checked by the run
+        output_dir(cfg["run_dir"], "run_dir")
     except (UserError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         raise SystemExit(2) from None
+    return cfg
+
+
+def _first_missing(path: Path) -> Path | None:
+    """The outermost directory of `path` (itself or an ancestor) that does not exist yet; None if `path` exists."""
+    missing = None
+    for p in (path, *path.parents):
+        if p.exists():
+            break
+        missing = p
+    return missing
+
+
+def _remove_created(run_dir: Path, created: Path) -> None:
+    """Remove the empty directories from `run_dir` up to `created` (what Hydra made for a start that failed)."""
+    for p in (run_dir, *run_dir.parents):
+        try:
+            p.rmdir()
+        except OSError:  # not empty (something else lives there) or gone
+            return
+        if p == created:
+            return
 
 
 def main() -> None:
-    """Single run: exit 0, or 2 with a one-line error. Multirun (``-m``): exit with the number of failed jobs,
-    after the summary ``sweep: N/M jobs finished``."""
+    """Single run: exit 0, or 2 with a one-line error; a failed start leaves no directory behind. Multirun (``-m``):
+    exit with the number of failed jobs, after the summary ``sweep: N/M jobs finished``."""
+    from pathrl.cli.common import hydra_safe
+
+    sys.argv[1:] = hydra_safe(sys.argv[1:])  # non-ASCII paths: quoted for Hydra's grammar
+    created = None
     try:
-        _precheck(sys.argv[1:])
+        cfg = _precheck(sys.argv[1:])
+        run_dir = Path(cfg["run_dir"]).absolute() if cfg is not None else None
+        created = _first_missing(run_dir) if run_dir is not None else None
         _app()
         code = 0
     except SystemExit as exc:
         code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
+    if code != 0 and created is not None:
+        _remove_created(run_dir, created)
     raise SystemExit(sweep_report.sweep_exit_code(code))
 
 

@@ -5,9 +5,11 @@
 
 PATH is a run directory (its ``episodes.mcap`` and/or ``run.mcap``; ``industrial.mcap`` of ``pathrl-industrial
 record``, ``trueadapt.mcap`` of ``tools/trueadapt_record.py``) or one of those files. Each MCAP becomes
-one ``.rrd`` next to it (``episodes.rrd`` / ``run.rrd``) unless ``--save`` names the output (only when a
-single file is converted). The viewer is started only on request: ``--spawn`` (native window) or ``--serve``
-(web viewer, like ``rerun --serve-web``; blocks until Ctrl-C).
+one ``.rrd`` next to it (``episodes.rrd`` / ``run.rrd``; a selection ``episodes_worst5.rrd`` /
+``episodes_ep0-5-17.rrd``, so the full recording is never replaced by a part of it) unless ``--save`` names the
+output (only when a single file is converted). Outputs are checked before anything is converted. The viewer is
+started only on request: ``--spawn`` (native window) or ``--serve`` (web viewer, like ``rerun --serve-web``; blocks
+until Ctrl-C).
 """
 
 from __future__ import annotations
@@ -17,9 +19,10 @@ import os
 import sys
 from pathlib import Path
 
-from pathrl.cli.common import UserError, run_cli
+from pathrl.cli.common import UserError, output_file, run_cli
+from pathrl.logging.mcap_io import is_finished
 
-__all__ = ["build_parser", "inputs_of", "main", "parse_ids"]
+__all__ = ["build_parser", "default_output", "inputs_of", "main", "parse_ids"]
 
 
 class _Parser(argparse.ArgumentParser):
@@ -76,6 +79,17 @@ def inputs_of(path: Path) -> list[tuple[str, Path]]:
     return [(kind_of(path), path)]
 
 
+def default_output(src: Path, ids: list[int] | None, worst: int | None) -> Path:
+    """The ``.rrd`` beside `src`: ``episodes.rrd`` for all episodes, ``episodes_worst<N>.rrd`` or
+    ``episodes_ep<id>-<id>....rrd`` for a selection (a part never replaces the whole recording)."""
+    if worst is not None:
+        return src.with_name(f"{src.stem}_worst{worst}.rrd")
+    if ids is not None:
+        shown = "-".join(map(str, ids[:8])) + (f"-and-{len(ids) - 8}-more" if len(ids) > 8 else "")
+        return src.with_name(f"{src.stem}_ep{shown}.rrd")
+    return src.with_suffix(".rrd")
+
+
 def _main(argv: list[str]) -> None:
     from pathrl.viz import rerun_view as rv
 
@@ -87,8 +101,10 @@ def _main(argv: list[str]) -> None:
         raise UserError(
             "--spawn needs a display (DISPLAY/WAYLAND_DISPLAY unset); use --serve or open the .rrd elsewhere"
         )
-    if args.save is not None and not args.save.parent.is_dir():
-        raise UserError(f"--save {args.save}: directory {args.save.parent} does not exist")
+    if args.save is not None:
+        output_file(args.save, "--save")
+        if not args.save.parent.is_dir():
+            raise UserError(f"--save {args.save}: directory {args.save.parent} does not exist")
     try:
         jobs = inputs_of(args.path)
         if args.save is not None and len(jobs) > 1:
@@ -98,9 +114,16 @@ def _main(argv: list[str]) -> None:
         kinds = {k for k, _ in jobs}
         if (ids is not None or args.worst is not None) and "episodes" not in kinds:
             raise UserError(f"--episodes/--worst need an episodes.mcap; {args.path} has none")
+        targets = [(kind, src, args.save or default_output(src, ids if kind == "episodes" else None,
+                                                           args.worst if kind == "episodes" else None))
+                   for kind, src in jobs]
+        for _, _, out in targets:
+            output_file(out, "--save" if args.save else "output")
         outs = []
-        for kind, src in jobs:
-            out = args.save or src.with_suffix(".rrd")
+        for kind, src, out in targets:
+            if not is_finished(src):
+                print(f"warning: {src} ends without the MCAP footer (cut off, or a run killed or still writing); "
+                      "converting what is readable", file=sys.stderr)
             if kind == "episodes":
                 stats = rv.episodes_to_rrd(src, out, ids=ids, worst=args.worst, timeline=args.timeline)
                 what = f"{stats.items} episodes"

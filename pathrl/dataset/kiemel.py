@@ -27,9 +27,18 @@ from pathrl.dataset.io import Dataset, DatasetError, check_destination, save_dat
 from pathrl.dataset.stats import dataset_stats
 from pathrl.robot.model import RobotSpec
 
-__all__ = ["find_spline_config", "import_kiemel", "read_episode"]
+__all__ = ["MAX_COEFF_RAD", "MAX_KNOTS", "MAX_PATH_LENGTH_RAD", "find_spline_config", "import_kiemel",
+           "read_episode"]
 
 SPLINE_CONFIG = "spline_config.json"
+
+#: Bounds on what an episode file may hold, checked before anything is evaluated or tabulated: far beyond any
+#: robot's joints (the committed sets: |q| <= 3.2 rad, paths <= 30 rad, <= 300 knots), small enough that a path's
+#: arc-length table (one sample per mrad) stays within memory. A B-spline lies in the convex hull of its
+#: coefficients, so bounded coefficients bound the path.
+MAX_COEFF_RAD = 100.0
+MAX_KNOTS = 100_000
+MAX_PATH_LENGTH_RAD = 1000.0
 
 
 def read_episode(path: Path, path_dof: int | None = None) -> np.ndarray:
@@ -60,13 +69,20 @@ def read_episode(path: Path, path_dof: int | None = None) -> np.ndarray:
         raise DatasetError(f"{path}: expected 1-D '_b_spline.t' and '_u' and 2-D '_b_spline.c'")
     if not (np.all(np.isfinite(t)) and np.all(np.isfinite(c)) and np.all(np.isfinite(u))):
         raise DatasetError(f"{path}: NaN or inf in '_b_spline' or '_u'")
+    if len(u) > MAX_KNOTS or len(c) > MAX_KNOTS:
+        raise DatasetError(f"{path}: {max(len(u), len(c))} knots or coefficients; at most {MAX_KNOTS} are imported")
+    if c.size and np.abs(c).max() > MAX_COEFF_RAD:
+        raise DatasetError(f"{path}: spline coefficient {np.abs(c).max():.3g} rad is beyond {MAX_COEFF_RAD:g} rad "
+                           "(not joint positions in rad?)")
     if path_dof is not None and c.shape[1] != path_dof:
         raise DatasetError(f"{path}: spline has {c.shape[1]} joints, robot has {path_dof} path joints")
     if len(u) < 2:
         raise DatasetError(f"{path}: '_u' needs at least 2 knot parameters, got {len(u)}")
     if np.any(np.diff(u) <= 0):
         raise DatasetError(f"{path}: '_u' is not strictly increasing")
-    if k < 1 or len(t) != c.shape[0] + k + 1:
+    if not 1 <= k <= 5:
+        raise DatasetError(f"{path}: B-spline degree k={k}; expected 1 to 5 (the authors' splines are cubic)")
+    if len(t) != c.shape[0] + k + 1:
         raise DatasetError(f"{path}: inconsistent B-spline: len(t)={len(t)}, len(c)={c.shape[0]}, k={k}")
     if np.any(np.diff(t) < 0):
         raise DatasetError(f"{path}: '_b_spline.t' is not non-decreasing")
@@ -75,8 +91,12 @@ def read_episode(path: Path, path_dof: int | None = None) -> np.ndarray:
     knots = BSpline(t, c, k)(u)
     if not np.all(np.isfinite(knots)):
         raise DatasetError(f"{path}: spline evaluates to NaN at '_u'")
-    if np.all(np.linalg.norm(np.diff(knots, axis=0), axis=1) <= 1e-9):
+    gaps = np.linalg.norm(np.diff(knots, axis=0), axis=1)
+    if np.all(gaps <= 1e-9):
         raise DatasetError(f"{path}: path has fewer than two distinct knots")
+    if gaps.sum() > MAX_PATH_LENGTH_RAD:
+        raise DatasetError(f"{path}: path through the knots is {gaps.sum():.3g} rad long; at most "
+                           f"{MAX_PATH_LENGTH_RAD:g} rad are imported")
     return knots
 
 

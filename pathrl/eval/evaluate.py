@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 import os
 import sys
 import time
@@ -51,7 +52,7 @@ from pathrl.robot.model import RobotSpec, load_robot
 from pathrl.storage import CheckpointError, latest_checkpoint, load_checkpoint, write_json_atomic
 
 __all__ = ["FAILURE_METRIC", "POLICY_MODELS", "PYBULLET_ENVS", "RunError", "committed_split", "evaluate",
-           "load_policy", "load_run", "write_episodes_mcap"]
+           "load_policy", "load_run", "policy_scale", "write_episodes_mcap"]
 
 
 class RunError(ValueError):
@@ -104,6 +105,25 @@ def load_run(run_dir: Path) -> tuple[dict[str, Any], Path | None, dict[str, Any]
         if not isinstance(summary, dict):
             raise RunError(f"{run_dir / 'summary.json'}: expected a JSON object, got {type(summary).__name__}")
     return cfg, ckpt, summary
+
+
+def policy_scale(run_dir: Path, summary: dict[str, Any]) -> float:
+    """The length scale D (``knot_gap_norm``) a policy's state was normalised with in training, from the run's
+    ``summary.json``. RunError without it: a D recomputed from other paths would scale the state differently, and
+    the policy would run on, with other deviations, without a word."""
+    gap = summary.get("knot_gap_norm")
+    if gap is None:
+        where = Path(run_dir) / "summary.json"
+        state = "has no knot_gap_norm" if where.is_file() else "is missing"
+        raise RunError(f"{where} {state}: the policy's length scale (the state's normalisation in training) is "
+                       "recorded there; restore it from the run")
+    try:
+        value = float(gap)
+    except (TypeError, ValueError):
+        value = float("nan")
+    if not (math.isfinite(value) and value > 0):
+        raise RunError(f"{Path(run_dir) / 'summary.json'}: knot_gap_norm must be a number > 0, got {gap!r}")
+    return value
 
 
 #: Policy network classes a run's config may name (``agent.actor`` or ``agent.student``): evaluation builds
@@ -202,6 +222,7 @@ def evaluate(
     torch.set_num_threads(int(os.environ.get("PATHRL_THREADS", "1")))
     cfg, ckpt, summary = load_run(run_dir)
     ckpt = _checkpoint(run_dir, ckpt, checkpoint)
+    gap = policy_scale(run_dir, summary) if ckpt is not None else summary.get("knot_gap_norm")
     cfg = _with_task(cfg, task)
     robot = load_robot(cfg["robot"])
     knots = KnotStrategy.from_cfg(cfg["knots"])
@@ -210,8 +231,7 @@ def evaluate(
     if episodes is None:
         episodes = paths.num_paths if segments == "full" else 1200
     plan = evaluation_plan(paths, episodes, segments, seed)
-    gap = summary.get("knot_gap_norm")
-    if gap is None:  # runs killed before their first summary: D of the training split, as in training
+    if gap is None:  # a controller's directory without a summary: D of its training split, as in training
         gap = load_pathset(cfg["dataset"]["path"], "train", knots, robot=robot).max_knot_gap()
     # The deviation cut-off is a training device; evaluation tracks every episode to its end or budget (EVAL_ENV).
     has_task = task_cfg(cfg)["feedback"] is not None

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -10,7 +12,7 @@ from pathrl.industrial.mpgd import MPGDParams
 from pathrl.industrial.rl import RLParams
 from pathrl.industrial.speed_search import SearchParams
 
-__all__ = ["IndustrialAppCfg", "build"]
+__all__ = ["IndustrialAppCfg", "build", "check_app", "feedback_gain"]
 
 
 @dataclass
@@ -49,7 +51,49 @@ adds their per-seed summary, ``validate`` scores them on ``validation_n`` traini
     seed: int = 0
 
 
+def _numbers(node: Any, prefix: str = "") -> Iterator[tuple[str, float]]:
+    """(dotted key, value) of every float in a config mapping (lists included, as ``key[i]``)."""
+    if isinstance(node, dict):
+        for k, v in node.items():
+            yield from _numbers(v, f"{prefix}{k}.")
+    elif isinstance(node, list):
+        for i, v in enumerate(node):
+            yield from _numbers(v, f"{prefix.rstrip('.')}[{i}].")
+    elif isinstance(node, float):
+        yield prefix.rstrip("."), node
+
+
+def check_app(cfg: dict[str, Any]) -> None:
+    """ValueError (one line) for app values that would run into a wrong or empty result: NaN / inf anywhere, an
+    empty or non-positive ``sweep_speeds``, fewer than 2 ``waypoints``, a negative ``zone``, a bad ``policy``."""
+    for key, value in _numbers(cfg):
+        if not math.isfinite(value):
+            raise ValueError(f"{key} must be a finite number, got {value}")
+    speeds = cfg["sweep_speeds"]
+    if not speeds or any(not isinstance(v, (int, float)) or isinstance(v, bool) or v <= 0 for v in speeds):
+        raise ValueError(f"sweep_speeds must be a non-empty list of speeds > 0 (mm/s), got {speeds}")
+    if cfg["waypoints"] < 2:
+        raise ValueError(f"waypoints must be >= 2, got {cfg['waypoints']}")
+    if not cfg["zone"] >= 0:
+        raise ValueError(f"zone must be >= 0 (mm), got {cfg['zone']}")
+    if str(cfg["policy"]).startswith("feedback:"):
+        feedback_gain(cfg["policy"])
+
+
+def feedback_gain(spec: str) -> float:
+    """The gain G of ``policy=feedback:G`` (a finite number); ValueError otherwise."""
+    try:
+        gain = float(spec.split(":", 1)[1])
+    except ValueError:
+        raise ValueError(f"policy: expected feedback:<gain>, got {spec!r}") from None
+    if not math.isfinite(gain):
+        raise ValueError(f"policy: the feedback gain must be a finite number, got {spec!r}")
+    return gain
+
+
 def build(cfg: dict[str, Any]) -> tuple[ControllerParams, MPGDParams, SearchParams, RLParams]:
-    """The parameter dataclasses of a composed config mapping (ValueError on a bad value)."""
+    """The parameter dataclasses of a composed config mapping, its values checked first (:func:`check_app`;
+    ValueError on a bad value)."""
+    check_app(cfg)
     return (ControllerParams(**cfg["controller"]), MPGDParams(**cfg["mpgd"]), SearchParams(**cfg["search"]),
             RLParams(**cfg["rl"]))

@@ -19,7 +19,10 @@ from mcap.reader import NonSeekingReader, make_reader
 from mcap.well_known import MessageEncoding, SchemaEncoding
 from mcap.writer import CompressionType, Writer
 
-__all__ = ["McapJsonWriter", "dumps", "iter_messages", "read_messages", "topics_of"]
+__all__ = ["MCAP_MAGIC", "McapJsonWriter", "dumps", "is_finished", "iter_messages", "read_messages", "topics_of"]
+
+#: The bytes an MCAP file starts and (once finished) ends with.
+MCAP_MAGIC = b"\x89MCAP0\r\n"
 
 GENERIC_SCHEMA = {"type": "object"}
 
@@ -125,3 +128,14 @@ def read_messages(path: str | Path, topics: Iterable[str] | None = None) -> list
 def topics_of(path: str | Path) -> set[str]:
     """The topics that have messages in the MCAP file at `path`."""
     return {t for t, _, _ in iter_messages(path)}
+
+
+def is_finished(path: str | Path) -> bool:
+    """Whether the MCAP file at `path` ends with the closing magic bytes: finished, not cut off or still open."""
+    with open(path, "rb") as f:
+        f.seek(0, 2)
+        size = f.tell()
+        if size < 2 * len(MCAP_MAGIC):
+            return False
+        f.seek(size - len(MCAP_MAGIC))
+        return f.read() == MCAP_MAGIC

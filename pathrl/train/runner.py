@@ -5,6 +5,7 @@ from __future__ import annotations
 import copy
 import json
 import math
+import shutil
 import sys
 import time
 from collections.abc import Callable
@@ -15,7 +16,6 @@ import torch
 import yaml
 from rsl_rl.runners import DistillationRunner, OnPolicyRunner
 
-from pathrl.config.migrate import migrate
 from pathrl.envs.path_changes import with_path_changes
 from pathrl.envs.registry import make_env
 from pathrl.envs.state import restore, snapshot, snapshot_is_exact, unwrapped
@@ -25,17 +25,14 @@ from pathrl.policy import policy_role
 from pathrl.policy.models import MixedMLP, bfloat16_warning
 from pathrl.policy.residual import ControllerObs, ResidualEnv, check_residual_cfg, zero_last_layer
 from pathrl.storage import (
-    CheckpointError,
     atomic_write,
     checkpoint_iteration,
-    clean_leftovers,
     latest_checkpoint,
-    latest_valid_checkpoint,
     load_checkpoint,
-    run_checkpoints,
     save_checkpoint,
     write_json_atomic,
 )
+from pathrl.train.resume import RESUME_MAY_CHANGE, config_change, finished_summary, resume_checkpoint, resume_point
 
 __all__ = [
     "PathRLDistillationRunner", "PathRLRunner", "RESUME_MAY_CHANGE", "check_run_cfg", "config_change",
@@ -234,23 +231,10 @@ class PathRLDistillationRunner(PathRLRunner, DistillationRunner):
         return super().load_state(loaded, load_cfg or {"student": True, "optimizer": True, "iteration": True}, strict)
 
 
-def resume_point(run_dir: Path) -> Path | None:
-    """The checkpoint a resume continues from: the newest one that verifies. Temp files of interrupted writes
-    are removed and damaged newer checkpoints renamed to ``*.damaged`` (kept for inspection, never loaded).
-    None when the run has no checkpoint yet; an error when it has some but none verifies."""
-    clean_leftovers(run_dir)
-    newest, ckpt = latest_checkpoint(run_dir), latest_valid_checkpoint(run_dir)
-    if newest is not None and ckpt is None:
-        raise CheckpointError(f"{run_dir}: no checkpoint verifies; nothing to resume from")
-    for path in run_checkpoints(run_dir):
-        if ckpt is not None and checkpoint_iteration(path) > checkpoint_iteration(ckpt):
-            path.rename(path.with_name(path.name + ".damaged"))
-    return ckpt
-
-
 def check_run_cfg(cfg: dict[str, Any]) -> None:
     """Refuse run-level values that would run but give a wrong result (one-line ValueError naming the key); the
     env's own values are checked by :class:`pathrl.envs.tracking.TrackingEnvCfg`; unknown keys are refused."""
+    from pathrl.config.agent import check_agent
     from pathrl.config.schema import TrainAppCfg
     from pathrl.config.validate import check_keys
 
@@ -265,9 +249,7 @@ def check_run_cfg(cfg: dict[str, Any]) -> None:
     warm = cfg.get("critic_warmup") or {}
     if int(warm.get("iterations") or 0) < 0:
         raise ValueError(f"critic_warmup.iterations must be >= 0, got {warm['iterations']}")
-    for key in ("num_steps_per_env", "save_interval"):
-        if key in cfg["agent"] and int(cfg["agent"][key]) < 1:
-            raise ValueError(f"agent.{key} must be >= 1, got {cfg['agent'][key]}")
+    check_agent(cfg.get("agent"))  # RSL-RL's keys: types and ranges (gamma, lambda, learning rate, dims, ...)
     if cfg.get("float32_from") is not None:
         float32_iteration(cfg["float32_from"], int(cfg["iterations"]))
     _check_lr_decay(cfg)
@@ -275,12 +257,41 @@ def check_run_cfg(cfg: dict[str, Any]) -> None:
 
 
 def train(cfg: dict[str, Any], run_dir: Path, resume: bool = False) -> dict[str, Any]:
-    """Train (or resume) a policy; writes config.yaml, checkpoints, run.mcap and summary.json into `run_dir`."""
+    """Train (or resume) a policy; writes config.yaml, checkpoints, run.mcap and summary.json into `run_dir`.
+
+    A start that fails before its first checkpoint leaves `run_dir` as it found it (missing or empty); a resume
+    with nothing left to do changes nothing and returns the run's summary."""
     check_run_cfg(cfg)
+    run_dir = Path(run_dir)
+    fresh = not run_dir.exists() or (run_dir.is_dir() and not any(run_dir.iterdir()))
+    existed = run_dir.exists()
+    try:
+        return _train(cfg, run_dir, resume)
+    except BaseException:
+        if fresh and run_dir.is_dir() and latest_checkpoint(run_dir) is None:
+            _undo_start(run_dir, keep_dir=existed)
+        raise
+
+
+def _undo_start(run_dir: Path, keep_dir: bool) -> None:
+    """Remove what a failed start wrote into `run_dir` (and the directory itself unless `keep_dir`)."""
+    for p in list(run_dir.iterdir()):
+        shutil.rmtree(p, ignore_errors=True) if p.is_dir() and not p.is_symlink() else p.unlink(missing_ok=True)
+    if not keep_dir:
+        run_dir.rmdir()
+
+
+def _train(cfg: dict[str, Any], run_dir: Path, resume: bool) -> dict[str, Any]:
+    """:func:`train` after its checks."""
     torch.set_num_threads(int(cfg.get("threads", 1)))
     torch.manual_seed(int(cfg["seed"]))
     run_dir.mkdir(parents=True, exist_ok=True)
-    ckpt = _resume_checkpoint(run_dir, cfg, resume)
+    ckpt = resume_checkpoint(run_dir, cfg, resume)
+    finished = finished_summary(run_dir, ckpt, int(cfg["iterations"]))
+    if finished is not None:
+        print(f"note: {run_dir} has finished {finished['iterations']} iterations (iterations={cfg['iterations']}): "
+              "nothing to do, nothing changed", file=sys.stderr)
+        return finished
     with LimitBackend(native=LimitBackend.from_run(cfg).native).active():  # the run's native choice, kernels eager
         env = make_env(cfg, "train")  # bad values and data fail here, before anything is written into run_dir
     if slow := bfloat16_warning(cfg["agent"]):  # bfloat16 on a CPU that emulates it: a PPO update ~13x slower
@@ -365,21 +376,6 @@ def _schedules(runner: PathRLRunner, cfg: dict[str, Any], total: int) -> None:
         runner.set_float32_from(float32_iteration(cfg["float32_from"], total))
 
 
-def _resume_checkpoint(run_dir: Path, cfg: dict[str, Any], resume: bool) -> Path | None:
-    """The checkpoint a run resumes from (None: a new run, the leftovers of a killed start cleaned); refuses to
-    overwrite checkpoints without `resume` and to resume under another config."""
-    if latest_checkpoint(run_dir) is not None and not resume:
-        raise FileExistsError(f"{run_dir} already holds checkpoints; pass resume=true or choose another run_dir")
-    ckpt = resume_point(run_dir) if resume else None
-    if ckpt is None:
-        clean_leftovers(run_dir)
-    if ckpt is not None and (run_dir / "config.yaml").exists():
-        diff = config_change(yaml.safe_load((run_dir / "config.yaml").read_text()), cfg)
-        if diff:
-            raise ValueError(f"resume with a different config ({diff}); use the same overrides or a new run_dir")
-    return ckpt
-
-
 def _check_lr_decay(cfg: dict[str, Any]) -> None:
     """ValueError for an `lr_decay` that would not act as written (bad values; PPO's adaptive schedule)."""
     decay = cfg.get("lr_decay") or {}
@@ -449,26 +445,3 @@ def _with_base(cfg: dict[str, Any], env: PathTrackingEnv) -> ResidualEnv:
 
     scale, spec = check_residual_cfg(cfg["residual"])
     return ResidualEnv(env, make_controller(spec, env), scale)
-
-
-#: Top-level keys a resume may change.
-RESUME_MAY_CHANGE = frozenset({"resume", "iterations", "compile_limits", "native_limits"})
-
-
-def config_change(saved: dict[str, Any], cfg: dict[str, Any]) -> str:
-    """The first difference (``key: saved != now``) between a run's saved config and the config it is resumed with,
-    both in the current layout (:func:`pathrl.config.migrate.migrate`: a key added after the run was saved counts
-    as its old behaviour); "" when they agree up to :data:`RESUME_MAY_CHANGE`."""
-    return _config_diff(migrate(saved), migrate(cfg), ignore=set(RESUME_MAY_CHANGE))
-
-
-def _config_diff(a: Any, b: Any, ignore: set[str], prefix: str = "") -> str:
-    if isinstance(a, dict) and isinstance(b, dict):
-        for k in sorted(set(a) | set(b)):
-            if not prefix and k in ignore:
-                continue
-            d = _config_diff(a.get(k), b.get(k), ignore, f"{prefix}{k}.")
-            if d:
-                return d
-        return ""
-    return "" if a == b else f"{prefix.rstrip('.')}: {a!r} != {b!r}"

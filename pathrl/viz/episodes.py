@@ -121,7 +121,7 @@ def episodes_to_rrd(
         _log_extras(rec, chosen, starts)
         rec.flush()
         rec.disconnect()
-    tmp.replace(out)
+        tmp.replace(out)  # inside: a failed rename (out is a directory) removes the temp file
     return ConvertStats(out, "episodes", len(chosen), time.perf_counter() - t0, out.stat().st_size, notes)
 
 

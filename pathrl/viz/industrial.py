@@ -203,7 +203,7 @@ def industrial_to_rrd(src: Path, out: Path) -> ConvertStats:
         stream.log("summary", rr.TextDocument(summary_markdown(rec, src), media_type="text/markdown"), static=True)
         stream.flush()
         stream.disconnect()
-    tmp.replace(out)
+        tmp.replace(out)  # inside: a failed rename (out is a directory) removes the temp file
     return ConvertStats(out, "industrial", len(rec.iterations), time.perf_counter() - t0, out.stat().st_size)
 
 

@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from pathrl.logging.mcap_io import iter_messages
+from pathrl.logging.mcap_io import MCAP_MAGIC, is_finished, iter_messages
 from pathrl.logging.schema import (
     EPISODE_TOPICS,
     EVAL_EPISODE_METRICS,
@@ -30,11 +30,10 @@ from pathrl.logging.schema import (
 )
 
 __all__ = [
-    "Episode", "MCAP_MAGIC", "QUANTITIES", "RobotInfo", "ViewError", "check_mcap", "finite", "jerk", "kind_of",
-    "progress_and_deviation", "read_episodes", "read_run", "select_episodes",
+    "Episode", "MCAP_MAGIC", "QUANTITIES", "RobotInfo", "ViewError", "check_mcap", "finite", "is_finished", "jerk",
+    "kind_of", "progress_and_deviation", "read_episodes", "read_run", "select_episodes",
 ]
 
-MCAP_MAGIC = b"\x89MCAP0\r\n"
 QUANTITIES = ("position", "velocity", "acceleration", "jerk")
 
 
@@ -62,6 +61,9 @@ def kind_of(path: Path) -> str:
     if TRAIN_SCALARS in topics or RUN_CONFIG in topics:
         return "run"
     found = ", ".join(sorted(topics)) or "none"
+    if not is_finished(path):
+        raise ViewError(f"{path}: truncated or damaged MCAP (it ends without the MCAP footer); readable "
+                        f"channels: {found}")
     raise ViewError(
         f"{path}: no pathrl channels (need {' + '.join(EPISODE_TOPICS)} or {TRAIN_SCALARS}); found: {found}"
     )

@@ -23,6 +23,7 @@ from pathrl.viz.reading import (
     ViewError,
     _topics,
     check_mcap,
+    is_finished,
     jerk,
     progress_and_deviation,
     read_episodes,
@@ -59,6 +60,7 @@ __all__ = [
     "check_mcap",
     "episodes_to_rrd",
     "industrial_to_rrd",
+    "is_finished",
     "jerk",
     "kind_of",
     "metrics_markdown",
@@ -90,4 +92,6 @@ def kind_of(path: Path) -> str:
     try:
         return _episodes_or_run(path)
     except ViewError as exc:
+        if not is_finished(path):  # cut off: the message says so, the other kinds' channels do not help
+            raise
         raise ViewError(f"{exc} (or {' + '.join(INDUSTRIAL_TOPICS)} or {' + '.join(TRUEADAPT_TOPICS)})") from None

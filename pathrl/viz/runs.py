@@ -51,7 +51,7 @@ def run_to_rrd(src: Path, out: Path) -> ConvertStats:
             )
         rec.flush()
         rec.disconnect()
-    tmp.replace(out)
+        tmp.replace(out)  # inside: a failed rename (out is a directory) removes the temp file
     return ConvertStats(out, "run", len(curves), time.perf_counter() - t0, out.stat().st_size)
 
 

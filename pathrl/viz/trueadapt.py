@@ -130,7 +130,7 @@ def trueadapt_to_rrd(src: Path, out: Path) -> ConvertStats:
         _log_outcomes(rec, src, robot_msg, episodes, starts)
         rec.flush()
         rec.disconnect()
-    tmp.replace(out)
+        tmp.replace(out)  # inside: a failed rename (out is a directory) removes the temp file
     return ConvertStats(out, "trueadapt", len(episodes), time.perf_counter() - t0, out.stat().st_size, notes)
 
 
