@@ -294,7 +294,7 @@ def test_gpu_check_dry_run_from_a_bare_copy(tmp_path):
     report = json.loads((copy / "bench" / "gpu.json").read_text())
     assert report["ok"] and report["dry_run"] and report["devices"] == DEVICES
     assert Path(report["machine"]["package"]) == (copy / "pathrl").resolve()
-    assert report["dataset"].startswith("generated") and all(report["passed"].values())
+    assert report["dataset"].startswith("generated") and all(report["passed"].values()) and len(report["passed"]) >= 5
     assert {(r["device"], r["num_envs"]) for r in report["bench"]["env_steps"]} == {(d, 64) for d in DEVICES}
     assert {r["device"] for r in report["bench"]["ppo_iteration"]} == set(DEVICES)
 
@@ -335,6 +335,12 @@ def test_gpu_check_refuses_bad_arguments_and_a_machine_without_cuda(tmp_path, ca
     if not torch.cuda.is_available():
         assert gpu_check.main(["--model", str(MODEL), "--out", str(tmp_path / "g.json")]) == 2
         assert "sees no CUDA device" in capsys.readouterr().err and not (tmp_path / "g.json").exists()
+    from pathrl.repro import trueadapt as adapt
+
+    assert gpu_check.main(["--model", str(ROOT / "models" / adapt.REALTIME_MODEL), "--dry-run"]) == 2
+    assert "the device checks take a policy of task tracking or ball_on_plate" in capsys.readouterr().err
     cmds = gpu_check.install_commands("cu128")
     assert cmds[0][-3:] == ["torch==2.13.0", "--index-url", "https://download.pytorch.org/whl/cu128"]
     assert not any(d.startswith("torch") for d in cmds[1][4:]) and "rsl-rl-lib==5.5.1" in cmds[1]
+    assert gpu_check.install_commands("cu126", installed="2.13.0+cpu")[0][-1] == "--force-reinstall"
+    assert "--force-reinstall" not in gpu_check.install_commands("cu126", installed="2.13.0+cu126")[0]

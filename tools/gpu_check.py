@@ -47,13 +47,25 @@ SIZES = {
 }
 
 
-def install_commands(cuda: str, root: Path = ROOT) -> list[list[str]]:
-    """The pip commands of ``--install``: torch 2.13.0 for `cuda` (e.g. ``cu126``) from the PyTorch index, then the
-    other dependencies of ``root/pyproject.toml`` (torch already satisfied, so pip keeps the CUDA build)."""
+def _installed_torch() -> str | None:
+    """The installed torch's version (``2.13.0+cpu``), read without importing it; None if there is none."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("torch")
+    except PackageNotFoundError:
+        return None
+
+
+def install_commands(cuda: str, root: Path = ROOT, installed: str | None = None) -> list[list[str]]:
+    """The pip commands of ``--install``: torch 2.13.0 for `cuda` (e.g. ``cu126``) from the PyTorch index (over an
+    `installed` CPU build: reinstalled, pip would take ``2.13.0+cpu`` for 2.13.0), then the other dependencies of
+    ``root/pyproject.toml`` (torch already satisfied, so pip keeps the CUDA build)."""
     deps = tomllib.loads((root / "pyproject.toml").read_text())["project"]["dependencies"]
     rest = [d for d in deps if not d.replace(" ", "").startswith(("torch=", "torch>", "torch<", "torch~"))]
     pip = [sys.executable, "-m", "pip", "install"]
-    return [[*pip, TORCH, "--index-url", TORCH_INDEX.format(cuda=cuda)], [*pip, *rest]]
+    force = ["--force-reinstall"] if installed is not None and installed.endswith("+cpu") else []
+    return [[*pip, TORCH, "--index-url", TORCH_INDEX.format(cuda=cuda), *force], [*pip, *rest]]
 
 
 #: What a copy of the check holds, besides the model (paths relative to the checkout).
@@ -103,7 +115,7 @@ def _args(argv: list[str] | None) -> argparse.Namespace:
 
 def _install(args: argparse.Namespace) -> None:
     """Run (or, in a dry run, print) the ``--install`` commands; a failed one ends the check (exit 2)."""
-    for cmd in install_commands(args.cuda):
+    for cmd in install_commands(args.cuda, installed=_installed_torch()):
         print(("would run: " if args.dry_run else "running: ") + shlex.join(cmd), flush=True)
         if not args.dry_run and subprocess.run(cmd).returncode != 0:
             print(f"error: {' '.join(cmd[:6])} failed", file=sys.stderr)
@@ -126,16 +138,26 @@ def _machine() -> dict[str, Any]:
             "cpu_count": os.cpu_count(), "package": str(Path(pathrl.__file__).resolve().parent)}
 
 
+def _guarded(fn, *args) -> dict[str, Any]:
+    """``fn(*args)``, or ``{"ok": False, "error": ...}`` if it raised: one failing check (or a GPU out of memory)
+    does not end the others."""
+    try:
+        return fn(*args)
+    except Exception as exc:  # noqa: BLE001 - recorded in the report
+        first = (str(exc).strip().splitlines() or [""])[0][:300]
+        return {"ok": False, "error": f"{type(exc).__name__}: {first}"}
+
+
 def _checks(model: Path, dataset: Path, devices: list[str], size: dict, work: Path) -> dict[str, Any]:
     """The device checks (:mod:`pathrl.train.device_check`) on every device of `devices`."""
     from pathrl.train import device_check as dc
 
     other = devices[-1]  # cuda where there is one; a CPU-only dry run compares the CPU's two limit codes
-    out: dict[str, Any] = {"refusals": dc.refusals()}
-    out["walker"] = {d: dc.walker_finds_misplaced(model, dataset, d) for d in devices}
-    out["parity"] = dc.step_parity(model, dataset, other, size["parity_envs"], size["parity_steps"])
-    out["train_resume_evaluate"] = {d: dc.train_resume_evaluate(model, dataset, d, work / d, size["train_envs"],
-                                                                size["train_steps"], size["episodes"])
+    out: dict[str, Any] = {"refusals": _guarded(dc.refusals)}
+    out["walker"] = {d: _guarded(dc.walker_finds_misplaced, model, dataset, d) for d in devices}
+    out["parity"] = _guarded(dc.step_parity, model, dataset, other, size["parity_envs"], size["parity_steps"])
+    out["train_resume_evaluate"] = {d: _guarded(dc.train_resume_evaluate, model, dataset, d, work / d,
+                                                size["train_envs"], size["train_steps"], size["episodes"])
                                     for d in devices}
     return out
 
@@ -151,13 +173,15 @@ def _bench(model: Path, dataset: Path, devices: list[str], size: dict, threads: 
     for d in devices:
         torch.set_num_threads(threads)
         cfg = dc.tracking_cfg(model, dataset, d)
-        steps += [dc.env_steps_per_s(cfg, n, size["bench_s"], size["warmup"]) for n in size["bench_envs"]]
+        steps += [{"device": d, "num_envs": n, **_guarded(dc.env_steps_per_s, cfg, n, size["bench_s"], size["warmup"])}
+                  for n in size["bench_envs"]]
         if d == "cpu":
             native_bf16 = not dry and bfloat16_slowdown() <= BFLOAT16_EMULATED
             dtypes = ["bfloat16"] if native_bf16 else ["float32"]
         else:
             dtypes = ["float32", *(["bfloat16"] if torch.cuda.is_bf16_supported() else [])]
-        ppo += [dc.ppo_iteration(cfg, size["ppo_envs"], dt) for dt in dtypes]
+        ppo += [{"device": d, "num_envs": size["ppo_envs"], "hidden_dtype": dt,
+                 **_guarded(dc.ppo_iteration, cfg, size["ppo_envs"], dt)} for dt in dtypes]
     return {"env_steps": steps, "ppo_iteration": ppo}
 
 
@@ -175,23 +199,28 @@ def _dataset(args: argparse.Namespace, work: Path) -> tuple[Path, str]:
 
 def _summary(report: dict[str, Any]) -> str:
     """A few lines for the terminal."""
-    lines = [f"gpu_check: {'ok' if report['ok'] else 'FAILED'} in {report['wall_time_s']:.0f} s "
-             f"({report['machine']['gpu'] or 'no GPU'}; torch {report['machine']['torch']})"]
+    gpu = report["machine"]["gpu"]
+    over = f", over the {report['budget_s']:.0f} s budget" if report["check_s"] > report["budget_s"] else ""
+    lines = [f"gpu_check: {'ok' if report['ok'] else 'FAILED'} in {report['check_s']:.0f} s{over} "
+             f"({gpu['name'] if gpu else 'no GPU'}; torch {report['machine']['torch']})"]
     for name, ok in report["passed"].items():
         lines.append(f"  {'ok  ' if ok else 'FAIL'} {name}")
     for r in report["bench"]["env_steps"]:
-        lines.append(f"  env steps/s {r['device']:>6} {r['num_envs']:>6} envs: {r['env_steps_per_s']:>12,.0f}")
+        rate = f"{r['env_steps_per_s']:>12,.0f}" if "error" not in r else r["error"]
+        lines.append(f"  env steps/s {r['device']:>6} {r['num_envs']:>6} envs: {rate}")
     for r in report["bench"]["ppo_iteration"]:
-        lines.append(f"  PPO iteration {r['device']:>6} {r['num_envs']} envs {r['hidden_dtype']}: "
-                     f"{r['s_per_iteration']:.3f} s ({r['samples_per_s']:,.0f} samples/s)")
+        took = (f"{r['s_per_iteration']:.3f} s ({r['samples_per_s']:,.0f} samples/s)" if "error" not in r
+                else r["error"])
+        lines.append(f"  PPO iteration {r['device']:>6} {r['num_envs']} envs {r['hidden_dtype']}: {took}")
     return "\n".join(lines)
 
 
-def _passed(checks: dict[str, Any]) -> dict[str, bool]:
-    """Check name -> passed."""
-    out = {"refusals": checks["refusals"]["ok"], "parity": checks["parity"]["ok"]}
-    out.update({f"walker {d}": r["ok"] for d, r in checks["walker"].items()})
-    out.update({f"train+resume+evaluate {d}": r["ok"] for d, r in checks["train_resume_evaluate"].items()})
+def _passed(checks: dict[str, Any], bench: dict[str, Any]) -> dict[str, bool]:
+    """Check name -> passed (the speed rows: measured without an error)."""
+    out = {"refusals": bool(checks["refusals"]["ok"]), "parity": bool(checks["parity"]["ok"])}
+    out.update({f"walker {d}": bool(r["ok"]) for d, r in checks["walker"].items()})
+    out.update({f"train+resume+evaluate {d}": bool(r["ok"]) for d, r in checks["train_resume_evaluate"].items()})
+    out["speed rows measured"] = not any("error" in r for rows in bench.values() for r in rows)
     return out
 
 
@@ -212,12 +241,18 @@ def main(argv: list[str] | None = None) -> int:
     import torch
 
     from pathrl.storage import write_json_atomic
-    from pathrl.train.device_check import available_devices
+    from pathrl.train.device_check import available_devices, model_cfg
 
+    try:
+        model_cfg(args.model)
+    except ValueError as exc:
+        print(f"error: --model {exc}", file=sys.stderr)
+        return 2
     if not args.dry_run and not torch.cuda.is_available():
         print(f"error: torch {torch.__version__} sees no CUDA device; run with --install on a GPU machine, or "
               "--dry-run for the flow on the CPU", file=sys.stderr)
         return 2
+    t_check = time.perf_counter()
     threads = args.threads or (1 if args.dry_run else os.cpu_count() or 1)
     torch.set_num_threads(threads)
     size, devices = SIZES["dry" if args.dry_run else "full"], available_devices()
@@ -225,11 +260,11 @@ def main(argv: list[str] | None = None) -> int:
         dataset, origin = _dataset(args, Path(tmp))
         checks = _checks(args.model, dataset, devices, size, Path(tmp))
         bench = _bench(args.model, dataset, devices, size, threads, args.dry_run)
-    passed = _passed(checks)
+    passed = _passed(checks, bench)
     report = {"dry_run": args.dry_run, "model": str(args.model), "dataset": origin, "devices": devices,
               "threads": threads, "machine": _machine(), "ok": all(passed.values()), "passed": passed,
               "checks": checks, "bench": bench, "wall_time_s": round(time.perf_counter() - t0, 1),
-              "budget_s": BUDGET_S}
+              "check_s": round(time.perf_counter() - t_check, 1), "budget_s": BUDGET_S}
     args.out.parent.mkdir(parents=True, exist_ok=True)
     write_json_atomic(args.out, report)
     print(_summary(report))

@@ -16,7 +16,7 @@ from typing import Any
 import torch
 from torch import Tensor, nn
 
-__all__ = ["DEVICE_RE", "EVAL_DEVICE", "DeviceError", "check_run_device", "native_note", "off_device",
+__all__ = ["DEVICE_RE", "EVAL_DEVICE", "WALKED", "DeviceError", "check_run_device", "native_note", "off_device",
            "resolve_device", "same_device"]
 
 #: The device evaluation, deployment and export build their env on (the saved run's ``device`` is not used).
@@ -30,12 +30,17 @@ class DeviceError(ValueError):
     """A device name that is misspelt, absent on this machine, or unfit for the run's task (one line)."""
 
 
+def _check_name(text: str) -> None:
+    """DeviceError for a device name that is not ``cpu``, ``cuda`` or ``cuda:N``."""
+    if not DEVICE_RE.match(text):
+        raise DeviceError(f"device={text}: expected cpu, cuda or cuda:N (N counts from 0)")
+
+
 def resolve_device(name: Any) -> torch.device:
     """The torch device of a config's ``device`` value; DeviceError (one line) for a misspelt name, for CUDA where
     this torch sees no CUDA device, and for ``cuda:N`` beyond the device count."""
     text = str(name).strip()
-    if not DEVICE_RE.match(text):
-        raise DeviceError(f"device={text}: expected cpu, cuda or cuda:N (N counts from 0)")
+    _check_name(text)
     device = torch.device(text)
     if device.type == "cuda":
         count = torch.cuda.device_count() if torch.cuda.is_available() else 0
@@ -60,10 +65,9 @@ def check_run_device(cfg: Mapping[str, Any]) -> torch.device:
     """The device of a resolved run config, checked before any work: a valid name (:func:`resolve_device`), and the
     CPU for a task simulated in PyBullet (its scenes and their state live in CPU worker processes)."""
     text = str(cfg.get("device", "cpu")).strip()
-    if not DEVICE_RE.match(text):
-        resolve_device(text)  # the misspelt-name error
+    _check_name(text)
     task = _pybullet_task(cfg)
-    if task is not None and not text.startswith("cpu"):
+    if task is not None and text != "cpu":
         hint = "" if task == "standing" else " or task.backend=analytic"
         raise DeviceError(f"device={text}: task {task} simulates in PyBullet, on the CPU only; use device=cpu{hint}")
     return resolve_device(text)

@@ -32,8 +32,9 @@ from pathrl.envs.state import restore, snapshot, unwrapped
 from pathrl.limits.backend import LimitBackend
 from pathrl.storage import load_checkpoint
 
-__all__ = ["PARITY_TOL", "available_devices", "env_steps_per_s", "model_cfg", "ppo_iteration", "refusals",
-           "step_parity", "sync", "tiny_run_cfg", "tracking_cfg", "train_resume_evaluate", "walker_finds_misplaced"]
+__all__ = ["CHECKED_TASKS", "PARITY_TOL", "available_devices", "env_steps_per_s", "model_cfg", "ppo_iteration",
+           "refusals", "step_parity", "sync", "tiny_run_cfg", "tracking_cfg", "train_resume_evaluate",
+           "walker_finds_misplaced"]
 
 #: Largest difference allowed between two devices: float64 states, observations and rewards, float32 actions.
 PARITY_TOL = {"state": 1e-6, "obs": 1e-5, "reward": 1e-5, "action": 1e-4}
@@ -50,27 +51,36 @@ def sync(device: torch.device | str) -> None:
         torch.cuda.synchronize(device)
 
 
+#: The tasks whose models the checks take: path tracking, without or with the ball on the plate (whose analytic
+#: model draws nothing while it steps, so two devices step alike from the same state).
+CHECKED_TASKS = ("tracking", "ball_on_plate")
+
+
 def model_cfg(model: Path) -> tuple[dict[str, Any], Path]:
-    """(run config in the current layout, checkpoint) of a shipped model or run directory."""
+    """(run config in the current layout, checkpoint) of a shipped model or run directory; ValueError (one line) for a
+    controller's directory or a task outside :data:`CHECKED_TASKS`."""
     from pathrl.eval.evaluate import load_run
 
     cfg, ckpt, _ = load_run(Path(model))
     if ckpt is None:
         raise ValueError(f"{model}: a model-based controller; the device checks need a trained policy")
+    task = (cfg.get("task") or {}).get("name", "tracking")
+    if task not in CHECKED_TASKS:
+        raise ValueError(f"{model}: task {task}; the device checks take a policy of task {' or '.join(CHECKED_TASKS)}")
     return cfg, ckpt
 
 
 def tiny_run_cfg(model: Path, dataset: Path, device: str, run_dir: Path, iterations: int, num_envs: int = 32,
                  steps_per_env: int = 8) -> dict[str, Any]:
     """The model's run config as a tiny run on `device`: `num_envs` envs x `steps_per_env` steps, a checkpoint every
-    iteration, one thread, eager limit kernels, no warm start or bias search, a PyBullet task on the analytic ball."""
+    iteration, one thread, eager limit kernels, no warm start or bias search, the ball analytic (PyBullet: CPU only)."""
     cfg = copy.deepcopy(model_cfg(model)[0])
     cfg.update(device=device, threads=1, compile_limits=False, iterations=int(iterations), resume=False, seed=0,
                run_dir=str(run_dir), experiment=f"device_check_{Path(model).name}", init_from=None, bias_search={})
     cfg["dataset"]["path"] = str(dataset)
     cfg["env"]["num_envs"] = int(num_envs)
     cfg["agent"].update(num_steps_per_env=int(steps_per_env), save_interval=1)
-    if (cfg.get("task") or {}).get("backend") == "pybullet" and cfg["task"]["name"] != "standing":
+    if (cfg.get("task") or {}).get("backend") == "pybullet":
         cfg["task"]["backend"] = "analytic"  # PyBullet trains on the CPU only
     return cfg
 
