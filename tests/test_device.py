@@ -184,6 +184,19 @@ def test_the_cpu_bfloat16_check_runs_for_cpu_runs_only(monkeypatch, capsys):
     assert len(calls) == 1 and "warning: slow" in capsys.readouterr().err
 
 
+def test_bfloat16_on_a_gpu_without_it_is_said(monkeypatch):
+    agent = {"actor": {"class_name": "pathrl.train.models:MixedPrecisionMLPModel", "hidden_dtype": "bfloat16"},
+             "critic": {"class_name": "pathrl.train.models:MixedPrecisionMLPModel", "hidden_dtype": "float32"}}
+    monkeypatch.setattr(torch.cuda, "is_bf16_supported", lambda including_emulation=True: False)
+    monkeypatch.setattr(torch.cuda, "get_device_name", lambda device=None: "Tesla T4")
+    line = placement.gpu_bfloat16_warning(agent, torch.device("cuda:0"))
+    assert line.startswith("Tesla T4 has no native bfloat16") and line.endswith(
+        "add agent.actor.hidden_dtype=float32 for a faster run")
+    assert placement.gpu_bfloat16_warning(agent, torch.device("cpu")) is None
+    monkeypatch.setattr(torch.cuda, "is_bf16_supported", lambda including_emulation=True: True)
+    assert placement.gpu_bfloat16_warning(agent, torch.device("cuda:0")) is None
+
+
 def test_a_cuda_resume_says_it_is_not_bit_exact(capsys):
     runner = SimpleNamespace(device="cuda:0")
     placement.resume_notes(runner, {"rng_cuda": torch.zeros(1)}, "model_3.pt", True)

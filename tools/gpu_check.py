@@ -132,7 +132,7 @@ def _machine() -> dict[str, Any]:
     if torch.cuda.is_available():
         p = torch.cuda.get_device_properties(0)
         gpu = {"name": p.name, "count": torch.cuda.device_count(), "memory_gb": round(p.total_memory / 2**30, 1),
-               "capability": f"{p.major}.{p.minor}", "bf16": torch.cuda.is_bf16_supported()}
+               "capability": f"{p.major}.{p.minor}", "bf16_native": torch.cuda.is_bf16_supported(False)}
     return {"host": platform.node(), "python": platform.python_version(), "torch": torch.__version__,
             "torch_cuda": torch.version.cuda, "gpu": gpu, "cpu": platform.processor() or platform.machine(),
             "cpu_count": os.cpu_count(), "package": str(Path(pathrl.__file__).resolve().parent)}
@@ -179,7 +179,7 @@ def _bench(model: Path, dataset: Path, devices: list[str], size: dict, threads: 
             native_bf16 = not dry and bfloat16_slowdown() <= BFLOAT16_EMULATED
             dtypes = ["bfloat16"] if native_bf16 else ["float32"]
         else:
-            dtypes = ["float32", *(["bfloat16"] if torch.cuda.is_bf16_supported() else [])]
+            dtypes = ["float32", *(["bfloat16"] if torch.cuda.is_bf16_supported() else [])]  # emulated: slow, shown
         ppo += [{"device": d, "num_envs": size["ppo_envs"], "hidden_dtype": dt,
                  **_guarded(dc.ppo_iteration, cfg, size["ppo_envs"], dt)} for dt in dtypes]
     return {"env_steps": steps, "ppo_iteration": ppo}
