@@ -11,6 +11,7 @@ import shutil
 from pathlib import Path
 
 import pytest
+import torch
 from test_storage import _flip_tensor_bytes
 from test_train import ROOT, run, train_cmd
 
@@ -21,7 +22,7 @@ from pathrl.dataset.io import save_dataset
 from pathrl.dataset.synthetic import smooth_paths
 from pathrl.robot.model import load_robot_by_name
 
-#: (override, expected text in the one line)
+#: (overrides, separated by spaces; expected text in the one line)
 TRAIN_CASES = {
     "negative iterations": ("iterations=-5", "iterations must be >= 1"),
     "zero envs": ("env.num_envs=0", "env.num_envs must be"),
@@ -31,7 +32,11 @@ TRAIN_CASES = {
     "zero substeps": ("env.substeps=0", "env.substeps must be"),
     "unknown segments": ("env.segments=bogus", "env.segments must be one of"),
     "zero threads": ("threads=0", "threads must be >= 1"),
-    "cuda without cuda": ("device=cuda", "no CUDA"),
+    "misspelt device": ("device=cdua", "device=cdua: expected cpu, cuda or cuda:N"),
+    "cuda index beyond the devices": (f"device=cuda:{max(torch.cuda.device_count(), 7)}",
+                                      f"device=cuda:{max(torch.cuda.device_count(), 7)} but"),
+    "PyBullet task on a GPU": ("task=ball_on_plate task.backend=pybullet device=cuda",
+                               "task ball_on_plate simulates in PyBullet, on the CPU only"),
     "added key typo": ("+env.num_env=5", "did you mean env.num_envs"),
     "added top-level key": ("+iteration=3", "did you mean iterations"),
     "removed reward weight": ("~reward.terms.path_length.weight", "weight is missing"),
@@ -42,6 +47,8 @@ TRAIN_CASES = {
     "lr_decay under adaptive PPO": ("lr_decay.final=1e-5", "lr_decay needs agent.algorithm.schedule=fixed"),
     "lr_decay start past the end": ("lr_decay={final:1e-5,start:1.0}", "lr_decay: final must be > 0 and start in"),
 }
+if not torch.cuda.is_available():  # where CUDA exists, device=cuda is a valid run
+    TRAIN_CASES["cuda without cuda"] = ("device=cuda", "no CUDA")
 
 
 def _one_line(stderr: str) -> str:
@@ -52,14 +59,15 @@ def _one_line(stderr: str) -> str:
 
 #: Cases run end to end through the ``pathrl-train`` process (the rest are checked in-process, below): a value,
 #: a Hydra composition error, an added key, and an error found only when the run builds its env.
-SUBPROCESS_CASES = ("negative iterations", "override of a missing key", "added key typo", "reward parameter typo")
+SUBPROCESS_CASES = ("negative iterations", "override of a missing key", "added key typo", "reward parameter typo",
+                    "misspelt device", "PyBullet task on a GPU")
 
 
 @pytest.mark.parametrize("case", SUBPROCESS_CASES)
 def test_train_bad_config_end_to_end(case, tiny_dataset, tmp_path):
     override, msg = TRAIN_CASES[case]
     run_dir = tmp_path / "run"
-    r = run(train_cmd(tiny_dataset, run_dir, 1, override))
+    r = run(train_cmd(tiny_dataset, run_dir, 1, *override.split(" ")))
     line = _one_line(r.stderr)
     assert r.returncode == 2 and line.startswith("error:") and msg in line, (case, line)
     assert not run_dir.exists()  # nothing written, no directory made
@@ -73,7 +81,7 @@ def test_train_bad_config(case, tiny_dataset, tmp_path, capsys):
     override, msg = TRAIN_CASES[case]
     run_dir = tmp_path / "run"
     with pytest.raises(SystemExit) as exc:
-        _precheck([f"dataset.path={tiny_dataset}", f"run_dir={run_dir}", "iterations=1", override])
+        _precheck([f"dataset.path={tiny_dataset}", f"run_dir={run_dir}", "iterations=1", *override.split(" ")])
     line = _one_line(capsys.readouterr().err)
     assert exc.value.code == 2 and line.startswith("error:") and msg in line, (case, line)
     assert not run_dir.exists()

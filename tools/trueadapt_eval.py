@@ -26,6 +26,7 @@ import torch
 
 from pathrl.cli.common import ArgParser, UserError, compose, output_dir, run_cli, to_container
 from pathrl.config.schema import TrainAppCfg
+from pathrl.envs.device import EVAL_DEVICE
 from pathrl.envs.trueadapt import build_trueadapt_env
 from pathrl.eval.evaluate import committed_split
 from pathrl.eval.trueadapt import ObservingPolicy, evaluate, reference_policy, summary
@@ -62,7 +63,9 @@ def load(args: argparse.Namespace, num_envs: int, **overrides):
         cfg["task"]["workers"] = args.workers
     dataset = args.dataset or committed_split(cfg["dataset"]["path"], args.split)
     args.resolved_dataset = dataset  # recorded with the result
-    env = build_trueadapt_env(cfg, args.split, num_envs, dataset, args.seed, autoreset=False, **overrides)
+    # the evaluation device, not the one the run was trained on (a GPU-trained run evaluates on a CPU-only machine)
+    env = build_trueadapt_env(cfg, args.split, num_envs, dataset, args.seed, autoreset=False,
+                              **{"device": EVAL_DEVICE, **overrides})
     try:
         if spec is not None:
             from pathrl.baselines.controllers import make_controller

@@ -31,14 +31,21 @@ def is_trueadapt(cfg: dict[str, Any]) -> bool:
     return get_task(cfg).adapt
 
 
-def make_feedback(cfg: dict[str, Any], robot: RobotSpec, num_envs: int, seed: int, backend: str | None = None):
-    """The feedback source of a config's task (None for plain tracking); `backend` overrides task.backend."""
+def make_feedback(cfg: dict[str, Any], robot: RobotSpec, num_envs: int, seed: int, backend: str | None = None,
+                  device: str | None = None):
+    """The feedback source of a config's task (None for plain tracking); `backend` overrides task.backend. `device`:
+    the env's (default: the config's); the analytic ball is built there, PyBullet refuses any but the CPU."""
     t = task_cfg(cfg)
     if t["feedback"] is None:
         return None
     if t["feedback"] not in FEEDBACKS:
         raise ValueError(f"task.feedback: unknown {t['feedback']!r}; known: {list(FEEDBACKS)}")
     backend = backend or t["backend"]
+    device = str(cfg.get("device", "cpu") if device is None else device)
+    if backend == "pybullet":
+        from pathrl.envs.device import check_run_device
+
+        check_run_device({"device": device, "task": {**t, "backend": backend}})
     rate = float(cfg["env"]["control_rate"])
     if t["imu"] and t["feedback"] != "ball_on_plate":
         raise ValueError(f"task.imu: the plate sensor exists only for task ball_on_plate, not {t['feedback']!r}")
@@ -53,7 +60,7 @@ def make_feedback(cfg: dict[str, Any], robot: RobotSpec, num_envs: int, seed: in
     if backend == "analytic":
         from pathrl.envs.feedback import AnalyticBall
 
-        return AnalyticBall(robot, num_envs, rate, seed=seed, device=str(cfg.get("device", "cpu")), imu=bool(t["imu"]))
+        return AnalyticBall(robot, num_envs, rate, seed=seed, device=device, imu=bool(t["imu"]))
     if backend == "pybullet":
         from pathrl.sim.vec import PyBulletBall
 

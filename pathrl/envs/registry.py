@@ -20,6 +20,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import Any
 
+from pathrl.envs.device import EVAL_DEVICE
 from pathrl.envs.factory import make_feedback, task_cfg
 from pathrl.envs.rewards import build_reward_terms
 from pathrl.envs.tracking_cfg import TrackingEnvCfg
@@ -28,10 +29,11 @@ from pathrl.robot.model import RobotSpec, load_robot
 
 __all__ = ["EVAL_ENV", "TASKS", "EnvRequest", "Task", "check_task", "get_task", "make_env", "task_names"]
 
-#: Env settings of an evaluation (and of deployment): no auto-reset, CPU, and no deviation or task-failure cut-off,
-#: so that every episode runs to its end or budget and a policy that leaves the path is not credited with a short
-#: episode (as the authors evaluated).
-EVAL_ENV: dict[str, Any] = {"autoreset": False, "device": "cpu", "max_deviation": None, "fail_terminates": False}
+#: Env settings of an evaluation (and of deployment): no auto-reset, the evaluation device (the CPU, whatever device
+#: the run was trained on), and no deviation or task-failure cut-off, so that every episode runs to its end or budget
+#: and a policy that leaves the path is not credited with a short episode (as the authors evaluated).
+EVAL_ENV: dict[str, Any] = {"autoreset": False, "device": EVAL_DEVICE, "max_deviation": None,
+                            "fail_terminates": False}
 
 
 @dataclass(frozen=True)
@@ -76,7 +78,7 @@ def _build_tracking(cfg: dict[str, Any], req: EnvRequest):
         paths = load_pathset(req.dataset_path or cfg["dataset"]["path"], req.split, KnotStrategy.from_cfg(cfg["knots"]),
                              robot=robot, out_of_limits=str(cfg["dataset"].get("out_of_limits", "refuse")))
     env_cfg = replace(TrackingEnvCfg.from_run(cfg, req.num_envs, req.seed, req.knot_gap_norm), **dict(req.overrides))
-    feedback = make_feedback(cfg, robot, env_cfg.num_envs, env_cfg.seed, req.backend)
+    feedback = make_feedback(cfg, robot, env_cfg.num_envs, env_cfg.seed, req.backend, device=env_cfg.device)
     if req.open_loop:
         if feedback is None:
             raise ValueError("open_loop=true: the run has no feedback task to freeze (give task=...)")

@@ -46,23 +46,33 @@ def snapshot(obj: Any) -> dict[str, Any]:
     return out
 
 
-def restore(obj: Any, state: dict[str, Any]) -> None:
-    """Put a :func:`snapshot` back into `obj` (the same kind of object, built from the same config)."""
+def restore(obj: Any, state: dict[str, Any], device: torch.device | str | None = None) -> None:
+    """Put a :func:`snapshot` back into `obj` (the same kind of object, built from the same config). Every tensor,
+    also those in dicts, goes to the device the same entry of `obj` is on (a new entry: to ``obj.device``, else
+    `device`), so a checkpoint loaded to the CPU restores a CUDA env; generator states are set as saved."""
+    device = getattr(obj, "device", device)
     for name, v in state.items():
         cur = getattr(obj, name, None)
         if isinstance(v, Tensor):
-            device = cur.device if isinstance(cur, Tensor) else getattr(obj, "device", v.device)
-            setattr(obj, name, v.to(device))
+            setattr(obj, name, v.to(_target(cur, device, v)))
         elif _GEN in v:
             if not isinstance(cur, torch.Generator):
                 raise ValueError(f"env state: {name} is not a generator in this env")
-            cur.set_state(v[_GEN])
+            cur.set_state(v[_GEN].cpu())  # a generator's state is a CPU byte tensor on every device
         elif "__part__" in v:
             if cur is None:
                 raise ValueError(f"env state: this env has no part {name!r}")
-            restore(cur, v["__part__"])
+            restore(cur, v["__part__"], device)
         else:
-            setattr(obj, name, dict(v))
+            old = cur if isinstance(cur, dict) else {}
+            setattr(obj, name, {k: t.to(_target(old.get(k), device, t)) for k, t in v.items()})
+
+
+def _target(cur: Any, device: torch.device | str | None, saved: Tensor) -> torch.device | str:
+    """Where a restored tensor goes: where `cur` (the entry it replaces) is, else `device`, else where it was saved."""
+    if isinstance(cur, Tensor):
+        return cur.device
+    return saved.device if device is None else device
 
 
 def snapshot_is_exact(env: Any) -> bool:

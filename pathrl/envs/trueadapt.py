@@ -430,7 +430,10 @@ def build_trueadapt_env(cfg: dict, split: str = "train", num_envs: int | None = 
     bank = load_trajectories(dataset_path or cfg["dataset"]["path"], split, robot, env_cfg.dt)
     ball = None
     if cfg["task"]["backend"] == "pybullet":
+        from pathrl.envs.device import check_run_device
         from pathrl.sim.vec import PyBulletBall
+
+        check_run_device({"device": env_cfg.device, "task": cfg["task"]})  # PyBullet: the CPU only
 
         ball = PyBulletBall(robot, env_cfg.num_envs, env_cfg.control_rate, seed=env_cfg.seed + 1,
                             workers=int(cfg["task"].get("workers", 2)))

@@ -61,6 +61,7 @@ def measure(model: Path, dataset: str | None, decisions: int) -> dict[str, Any]:
     """:func:`decision_times` of the shipped model directory `model` on the test split `dataset` (default: the
     committed test split of the model's dataset), analytic ball."""
     from pathrl import native
+    from pathrl.envs.device import EVAL_DEVICE
     from pathrl.envs.trueadapt import build_trueadapt_env
     from pathrl.eval.evaluate import committed_split, load_policy, load_run
     from pathrl.limits.backend import current
@@ -68,7 +69,7 @@ def measure(model: Path, dataset: str | None, decisions: int) -> dict[str, Any]:
     cfg, ckpt, _ = load_run(model)
     cfg["task"]["backend"] = "analytic"
     ds = dataset or committed_split(cfg["dataset"]["path"], "test")
-    env = build_trueadapt_env(cfg, "test", 1, ds, 0, autoreset=True)
+    env = build_trueadapt_env(cfg, "test", 1, ds, 0, autoreset=True, device=EVAL_DEVICE)  # not the run's device
     res = decision_times(env, load_policy(cfg, env, ckpt), decisions)
     return {"model": str(model), "dataset": ds, "threads": torch.get_num_threads(),
             "limits": "native" if current().native and native.available() else "torch", **res}

@@ -26,8 +26,8 @@ from rsl_rl.models import MLPModel
 from rsl_rl.modules import MLP
 from torch import nn
 
-__all__ = ["BFLOAT16_EMULATED", "HIDDEN_DTYPES", "MixedMLP", "MixedPrecisionMLPModel", "bfloat16_slowdown",
-           "bfloat16_warning"]
+__all__ = ["BFLOAT16_EMULATED", "HIDDEN_DTYPES", "MixedMLP", "MixedPrecisionMLPModel", "bfloat16_roles",
+           "bfloat16_slowdown", "bfloat16_warning"]
 
 
 HIDDEN_DTYPES = {"bfloat16": torch.bfloat16, "float32": torch.float32}
@@ -86,13 +86,19 @@ def bfloat16_slowdown(rows: int = 4096, reps: int = 3) -> float:
     return best(torch.bfloat16) / max(best(torch.float32), 1e-9)
 
 
+def bfloat16_roles(agent: Mapping[str, Any]) -> list[str]:
+    """The models of an agent config (``actor``, ``critic``, ``student``, ``teacher``) whose hidden layers compute in
+    bfloat16 (:class:`MixedPrecisionMLPModel` with ``hidden_dtype: bfloat16``)."""
+    return [r for r in ("actor", "critic", "student", "teacher")
+            if isinstance(agent.get(r), Mapping) and agent[r].get("hidden_dtype", "bfloat16") == "bfloat16"
+            and str(agent[r].get("class_name", "")).endswith("MixedPrecisionMLPModel")]
+
+
 def bfloat16_warning(agent: Mapping[str, Any], slowdown: float | None = None, limit: float = BFLOAT16_EMULATED
                      ) -> str | None:
     """One line for a run whose actor or critic (``agent.<role>.hidden_dtype``) asks for bfloat16 on a CPU where it is
     more than `limit` times slower than float32 (`slowdown`: measured by :func:`bfloat16_slowdown` when None)."""
-    roles = [r for r in ("actor", "critic", "student", "teacher")
-             if isinstance(agent.get(r), Mapping) and agent[r].get("hidden_dtype", "bfloat16") == "bfloat16"
-             and str(agent[r].get("class_name", "")).endswith("MixedPrecisionMLPModel")]
+    roles = bfloat16_roles(agent)
     if not roles:
         return None
     ratio = bfloat16_slowdown() if slowdown is None else slowdown

@@ -63,13 +63,16 @@ class ControllerObs:
         return {"controller": tensors, "label": label}
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
-        """Put a :meth:`state_dict` back (into a wrapper built from the same config)."""
+        """Put a :meth:`state_dict` back (into a wrapper built from the same config), each tensor onto the device
+        of the one it replaces (the label: the env's)."""
         for name, value in state["controller"].items():
-            if not isinstance(getattr(self.controller, name, None), Tensor):
+            cur = getattr(self.controller, name, None)
+            if not isinstance(cur, Tensor):
                 raise ValueError(f"controller state: {name} is not a tensor of this controller")
-            setattr(self.controller, name, value)
-        self._label = state["label"]
-        self._labelled_at = self._steps if state["label"] is not None else -1
+            setattr(self.controller, name, value.to(cur.device))  # a checkpoint loads to the CPU; the env may not
+        label = state["label"]
+        self._label = None if label is None else label.to(getattr(self.env, "device", label.device))
+        self._labelled_at = self._steps if label is not None else -1
 
     def _with_label(self, obs: TensorDict) -> TensorDict:
         obs[self.group] = self.label(obs)

@@ -17,9 +17,12 @@ The objective is therefore a deterministic function of the D offsets, and scipy'
 
 from __future__ import annotations
 
+import json
+import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -29,7 +32,8 @@ from torch import Tensor
 
 from pathrl.paths.segments import Segments, evaluation_plan
 
-__all__ = ["BiasSearchCfg", "episode_returns", "output_layer", "search_bias", "search_output_bias"]
+__all__ = ["BiasSearchCfg", "episode_returns", "output_layer", "search_before_training", "search_bias",
+           "search_output_bias"]
 
 
 @dataclass(frozen=True)
@@ -125,3 +129,24 @@ def search_output_bias(env: Any, actor: torch.nn.Module, cfg: BiasSearchCfg) -> 
     return {"offsets": [round(float(x), 6) for x in best], "mean_return_before": before, "mean_return_after": value,
             "evaluations": evals, "env_steps": steps[0], "episodes": cfg.episodes, "seed": cfg.seed, "bound": cfg.bound,
             "wall_time_s": round(time.perf_counter() - t0, 1)}
+
+
+def search_before_training(cfg: dict[str, Any], actor: torch.nn.Module, knot_gap: float, summary: Path
+                           ) -> dict[str, Any]:
+    """Search the actor's output offsets on the training return before PPO (this module's search), on an
+    env of its own (``bias_search.episodes`` envs, the run's training settings); records the search in the run's
+    `summary` (its wall time counted as training time) and returns the updated summary."""
+    from pathrl.envs.registry import make_env
+    from pathrl.storage import write_json_atomic
+
+    if cfg["agent"]["algorithm"]["class_name"] != "PPO" or cfg.get("residual"):
+        raise ValueError("bias_search: only for a PPO run without residual (a trained actor's output offsets)")
+    bs = BiasSearchCfg(**cfg["bias_search"])
+    search_env = make_env(cfg, "train", num_envs=bs.episodes, seed=bs.seed, knot_gap_norm=knot_gap)
+    record = search_output_bias(search_env, actor, bs)
+    print(f"bias_search: mean training return {record['mean_return_before']:.3f} -> {record['mean_return_after']:.3f} "
+          f"in {record['evaluations']} evaluations ({record['wall_time_s']} s)", file=sys.stderr)
+    out = {**json.loads(summary.read_text()), "bias_search": record}
+    out["wall_time_s"] = float(out.get("wall_time_s", 0.0)) + record["wall_time_s"]
+    write_json_atomic(summary, out)
+    return out

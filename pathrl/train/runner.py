@@ -16,13 +16,14 @@ import torch
 import yaml
 from rsl_rl.runners import DistillationRunner, OnPolicyRunner
 
+from pathrl.envs.device import check_run_device
 from pathrl.envs.path_changes import with_path_changes
 from pathrl.envs.registry import make_env
 from pathrl.envs.state import restore, snapshot, snapshot_is_exact, unwrapped
 from pathrl.envs.tracking import PathTrackingEnv
 from pathrl.limits.backend import LimitBackend
 from pathrl.policy import policy_role
-from pathrl.policy.models import MixedMLP, bfloat16_warning
+from pathrl.policy.models import MixedMLP
 from pathrl.policy.residual import ControllerObs, ResidualEnv, check_residual_cfg, zero_last_layer
 from pathrl.storage import (
     atomic_write,
@@ -32,6 +33,7 @@ from pathrl.storage import (
     save_checkpoint,
     write_json_atomic,
 )
+from pathrl.train.placement import placement_warning, resume_notes, start_notes
 from pathrl.train.resume import RESUME_MAY_CHANGE, config_change, finished_summary, resume_checkpoint, resume_point
 
 __all__ = [
@@ -189,6 +191,8 @@ class PathRLRunner(OnPolicyRunner):
         # The wall time in the checkpoint itself: time-to-quality curves read it (pathrl.eval.curve).
         saved["infos"] = {**(infos or {}), **({"wall_time_s": self.wall_time_s()} if self._summary else {})}
         saved["rng_torch"] = torch.get_rng_state()
+        if torch.device(self.device).type == "cuda":  # the action noise of a CUDA run is drawn there
+            saved["rng_cuda"] = torch.cuda.get_rng_state(self.device)
         saved["env_state"] = snapshot(unwrapped(self.env))
         saved["env_state_exact"] = snapshot_is_exact(self.env)
         if isinstance(self.env, ControllerObs):  # a teacher's or a residual's controller has a plan in progress
@@ -208,8 +212,9 @@ class PathRLRunner(OnPolicyRunner):
         return loaded.get("infos") or {}
 
     def restore_streams(self, loaded: dict) -> bool:
-        """The torch RNG and the env's episodes as they were at the checkpoint (checkpoints from before these
-        were stored have neither). Returns whether the continuation is exact."""
+        """The torch RNGs (CPU, and CUDA on a CUDA run) and the env's episodes as they were at the checkpoint, every
+        tensor on the run's device (checkpoints from before these were stored have neither). Returns whether the
+        env's episodes continue exactly."""
         if "env_state" not in loaded:
             return False
         restore(unwrapped(self.env), loaded["env_state"])
@@ -218,6 +223,8 @@ class PathRLRunner(OnPolicyRunner):
                 return False
             self.env.load_state_dict(loaded["controller_state"])
         torch.set_rng_state(loaded["rng_torch"])
+        if torch.device(self.device).type == "cuda" and "rng_cuda" in loaded:
+            torch.cuda.set_rng_state(loaded["rng_cuda"].cpu(), self.device)
         return bool(loaded.get("env_state_exact", False))
 
 
@@ -243,9 +250,7 @@ def check_run_cfg(cfg: dict[str, Any]) -> None:
         raise ValueError(f"iterations must be >= 1, got {cfg['iterations']}")
     if int(cfg.get("threads", 1)) < 1:
         raise ValueError(f"threads must be >= 1, got {cfg['threads']}")
-    device = str(cfg.get("device", "cpu"))
-    if device.startswith("cuda") and not torch.cuda.is_available():
-        raise ValueError(f"device={device} but this torch has no CUDA device; use device=cpu")
+    check_run_device(cfg)  # cpu, cuda, cuda:N that exists; a PyBullet task on the CPU only (DeviceError)
     warm = cfg.get("critic_warmup") or {}
     if int(warm.get("iterations") or 0) < 0:
         raise ValueError(f"critic_warmup.iterations must be >= 0, got {warm['iterations']}")
@@ -256,8 +261,10 @@ def check_run_cfg(cfg: dict[str, Any]) -> None:
     LimitBackend.from_run(cfg)  # native_limits, compile_limits: true or false
 
 
-def train(cfg: dict[str, Any], run_dir: Path, resume: bool = False) -> dict[str, Any]:
+def train(cfg: dict[str, Any], run_dir: Path, resume: bool = False,
+          on_start: Callable[[PathRLRunner], None] | None = None) -> dict[str, Any]:
     """Train (or resume) a policy; writes config.yaml, checkpoints, run.mcap and summary.json into `run_dir`.
+    `on_start(runner)` is called once the runner is built (and, on resume, restored), before the first iteration.
 
     A start that fails before its first checkpoint leaves `run_dir` as it found it (missing or empty); a resume
     with nothing left to do changes nothing and returns the run's summary."""
@@ -266,7 +273,7 @@ def train(cfg: dict[str, Any], run_dir: Path, resume: bool = False) -> dict[str,
     fresh = not run_dir.exists() or (run_dir.is_dir() and not any(run_dir.iterdir()))
     existed = run_dir.exists()
     try:
-        return _train(cfg, run_dir, resume)
+        return _train(cfg, run_dir, resume, on_start)
     except BaseException:
         if fresh and run_dir.is_dir() and latest_checkpoint(run_dir) is None:
             _undo_start(run_dir, keep_dir=existed)
@@ -281,7 +288,8 @@ def _undo_start(run_dir: Path, keep_dir: bool) -> None:
         run_dir.rmdir()
 
 
-def _train(cfg: dict[str, Any], run_dir: Path, resume: bool) -> dict[str, Any]:
+def _train(cfg: dict[str, Any], run_dir: Path, resume: bool,
+           on_start: Callable[[PathRLRunner], None] | None) -> dict[str, Any]:
     """:func:`train` after its checks."""
     torch.set_num_threads(int(cfg.get("threads", 1)))
     torch.manual_seed(int(cfg["seed"]))
@@ -294,8 +302,7 @@ def _train(cfg: dict[str, Any], run_dir: Path, resume: bool) -> dict[str, Any]:
         return finished
     with LimitBackend(native=LimitBackend.from_run(cfg).native).active():  # the run's native choice, kernels eager
         env = make_env(cfg, "train")  # bad values and data fail here, before anything is written into run_dir
-    if slow := bfloat16_warning(cfg["agent"]):  # bfloat16 on a CPU that emulates it: a PPO update ~13x slower
-        print(f"warning: {slow}", file=sys.stderr)
+    start_notes(cfg)
     env = with_path_changes(cfg, env)  # path_change group (pathrl.envs.path_changes); absent or off: env itself
     distill = cfg["agent"]["algorithm"]["class_name"] == "Distillation"
     if distill:
@@ -325,13 +332,18 @@ def _train(cfg: dict[str, Any], run_dir: Path, resume: bool) -> dict[str, Any]:
     elif cfg.get("residual"):
         zero_last_layer(runner.alg.get_policy())  # the untrained residual policy is its controller
     if ckpt is None and cfg.get("bias_search"):
-        prev = _bias_search(cfg, runner.alg.get_policy(), env.knot_gap, run_dir / "summary.json")
+        from pathrl.train.bias_search import search_before_training
+
+        prev = search_before_training(cfg, runner.alg.get_policy(), env.knot_gap, run_dir / "summary.json")
     total = int(cfg["iterations"])
     _schedules(runner, cfg, total)
     remaining = max(total - done_before, 0)
     runner.track_wall_time(run_dir / "summary.json", float(prev.get("wall_time_s", 0.0)))
-    if loaded is not None and not runner.restore_streams(loaded):
-        print(f"note: {ckpt.name} holds no exact env state; the resumed run starts new episodes", file=sys.stderr)
+    if loaded is not None:
+        resume_notes(runner, loaded, ckpt.name, runner.restore_streams(loaded))
+    placement_warning(runner)
+    if on_start is not None:
+        on_start(runner)
     if remaining:
         with LimitBackend.from_run(cfg).active():  # native_limits, compile_limits (the env follows it)
             runner.learn(num_learning_iterations=remaining)
@@ -402,25 +414,6 @@ def float32_iteration(fraction: Any, total: int) -> int:
 def _init_std(cfg: dict[str, Any]) -> float:
     """The initial action std of the policy (the PPO actor or the distillation student)."""
     return float(cfg["agent"][policy_role(cfg["agent"])]["distribution_cfg"].get("init_std", 1.0))
-
-
-def _bias_search(cfg: dict[str, Any], actor: torch.nn.Module, knot_gap: float, summary: Path) -> dict[str, Any]:
-    """Search the actor's output offsets on the training return before PPO (:mod:`pathrl.train.bias_search`), on an
-    env of its own (``bias_search.episodes`` envs, the run's training settings); records the search in the run's
-    `summary` (its wall time counted as training time) and returns the updated summary."""
-    from pathrl.train.bias_search import BiasSearchCfg, search_output_bias
-
-    if cfg["agent"]["algorithm"]["class_name"] != "PPO" or cfg.get("residual"):
-        raise ValueError("bias_search: only for a PPO run without residual (a trained actor's output offsets)")
-    bs = BiasSearchCfg(**cfg["bias_search"])
-    search_env = make_env(cfg, "train", num_envs=bs.episodes, seed=bs.seed, knot_gap_norm=knot_gap)
-    record = search_output_bias(search_env, actor, bs)
-    print(f"bias_search: mean training return {record['mean_return_before']:.3f} -> {record['mean_return_after']:.3f} "
-          f"in {record['evaluations']} evaluations ({record['wall_time_s']} s)", file=sys.stderr)
-    out = {**json.loads(summary.read_text()), "bias_search": record}
-    out["wall_time_s"] = float(out.get("wall_time_s", 0.0)) + record["wall_time_s"]
-    write_json_atomic(summary, out)
-    return out
 
 
 def _with_teacher(cfg: dict[str, Any], env: PathTrackingEnv):
