@@ -17,7 +17,7 @@ from pathrl.envs.rewards import build_reward_terms
 from pathrl.envs.tracking import PathTrackingEnv
 from pathrl.limits.check import limit_violations
 from pathrl.limits.feasible import JointLimits
-from pathrl.paths.pathset import build_pathset
+from pathrl.paths.quick import quick_knots, quick_pathsets
 from pathrl.paths.segments import full_segments
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -56,7 +56,7 @@ def test_follower_steps_exactly_like_the_batched_env(follower, test_knots):
     """The same actions give bit-identical states in the follower and in row 1 of a 3-env batch; the policy's own
     decisions agree to float32 rounding."""
     follower.reset(test_knots[1])
-    paths = build_pathset([follower.knots.apply(k) for k in test_knots[:3]], ["a", "b", "c"])
+    paths = quick_pathsets([quick_knots(follower.knots, k) for k in test_knots[:3]], ["a", "b", "c"])
     env = PathTrackingEnv(replace(follower.env_cfg, num_envs=3), follower.robot, paths,
                           build_reward_terms(follower.cfg["reward"]["terms"]))
     env.start_segments(torch.arange(3), full_segments(paths, torch.arange(3)))
