@@ -180,8 +180,10 @@ def main_(argv: list[str]) -> dict[str, Any]:
         knots = KnotStrategy.from_cfg(to_container(cfg.knots))
     except (RobotConfigError, ValueError) as exc:
         raise UserError(str(exc)) from None
-    data_dir = Path(str(cfg.dataset.path))
+    from pathrl.dataset.waypoints import as_dataset
+
     try:
+        data_dir = as_dataset(Path(str(cfg.dataset.path)), robot)  # a path file (or a directory of them): imported
         dataset = load_dataset(data_dir, robot)
         paths = load_pathset(dataset, str(cfg.split), knots, robot, out_of_limits=str(cfg.dataset.out_of_limits))
     except DatasetError as exc:
