@@ -188,10 +188,12 @@ def check_dataset(args: list[str], monkeypatch) -> None:
     import pathrl.dataset.generate
     import pathrl.dataset.io
     import pathrl.dataset.kiemel
+    import pathrl.dataset.waypoints
     from pathrl.cli import dataset
 
     monkeypatch.setattr(pathrl.dataset.generate, "generate_dataset", _stop)
     monkeypatch.setattr(pathrl.dataset.kiemel, "import_kiemel", _stop)
+    monkeypatch.setattr(pathrl.dataset.waypoints, "import_waypoints", _stop)
     monkeypatch.setattr(pathrl.dataset.io, "load_dataset", _stop)
     _run_main(dataset.main, args)
 

@@ -44,7 +44,8 @@ def cmd_check(path: str) -> None:
     ws = spec.workspace
     inside = ((tcp[1:] >= ws[:, 0]) & (tcp[1:] <= ws[:, 1])).all(axis=(1, 2)).mean()
     for k, t in enumerate(spec.tcps):
-        print(f"tcp       {t.link} + {list(t.offset)} m: at the middle of the range {np.round(tcp[0, k], 3).tolist()} m")
+        at = np.round(tcp[0, k], 3).tolist()
+        print(f"tcp       {t.link} + {list(t.offset)} m: at the middle of the range {at} m")
     print(f"workspace x {ws[0].tolist()} y {ws[1].tolist()} z {ws[2].tolist()} m: {100 * inside:.0f} % of 2000 uniform "
           "configurations put every TCP inside (random paths start only there)")
     if inside == 0:

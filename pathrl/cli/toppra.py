@@ -162,6 +162,7 @@ def main_(argv: list[str]) -> dict[str, Any]:
 
     cfg = compose("toppra_app", argv, ToppraAppCfg)
     from pathrl.dataset.io import DatasetError, load_dataset, load_pathset
+    from pathrl.dataset.waypoints import as_dataset
     from pathrl.paths.knots import KnotStrategy
     from pathrl.paths.segments import PROTOCOLS, evaluation_plan
     from pathrl.robot.model import RobotConfigError, load_robot
@@ -180,10 +181,8 @@ def main_(argv: list[str]) -> dict[str, Any]:
         knots = KnotStrategy.from_cfg(to_container(cfg.knots))
     except (RobotConfigError, ValueError) as exc:
         raise UserError(str(exc)) from None
-    from pathrl.dataset.waypoints import as_dataset
-
-    try:
-        data_dir = as_dataset(Path(str(cfg.dataset.path)), robot)  # a path file (or a directory of them): imported
+    try:  # a path file (or a directory of them) is imported into a dataset first
+        data_dir = as_dataset(Path(str(cfg.dataset.path)), robot)
         dataset = load_dataset(data_dir, robot)
         paths = load_pathset(dataset, str(cfg.split), knots, robot, out_of_limits=str(cfg.dataset.out_of_limits))
     except DatasetError as exc:
