@@ -200,7 +200,8 @@ def test_every_setpoint_of_an_accepted_path_is_inside_every_limit(refuse, clip, 
         try:
             follower.reset(knots)
         except FollowerError as exc:
-            assert follower is refuse and "position range" in str(exc), str(exc)
+            msg = str(exc)  # clipping can leave one point (every knot outside on the same side): refused too
+            assert (follower is refuse and "position range" in msg) or "fewer than two distinct" in msg, msg
             continue
         p, v, a = _follow(follower, decisions=150)
         assert _violations(follower, p, v, a)["total"] == 0

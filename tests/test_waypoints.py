@@ -60,7 +60,8 @@ def test_evenly_spaced_waypoints_on_a_line_give_a_path_of_its_length(tmp_path, i
     a = np.zeros(7)
     b = np.array([0.3, -0.4, 0.0, 0.5, 0.0, 0.0, 1.2])  # |b - a| = sqrt(0.09 + 0.16 + 0.25 + 1.44) = 1.3928...
     np.savetxt(tmp_path / "line.csv", np.linspace(a, b, 11), delimiter=",")
-    assert main(["import", "--format", "csv", "--robot", "iiwa7", str(tmp_path / "line.csv"), str(tmp_path / "ds")]) == 0
+    src, dest = tmp_path / "line.csv", tmp_path / "ds"
+    assert main(["import", "--format", "csv", "--robot", "iiwa7", str(src), str(dest)]) == 0
     for strategy in (KnotStrategy("distance", 0.3), KnotStrategy("curvature", 0.3), KnotStrategy("file")):
         ps = load_pathset(tmp_path / "ds", "test", strategy, iiwa)
         assert float(ps.length[0]) == pytest.approx(np.sqrt(1.94), abs=1e-9)

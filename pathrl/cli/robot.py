@@ -14,7 +14,7 @@ from collections.abc import Sequence
 
 from pathrl.cli.common import UserError, run_cli
 
-__all__ = ["main"]
+__all__ = ["cmd_check", "cmd_list", "main"]
 
 
 def cmd_check(path: str) -> None:

@@ -25,7 +25,8 @@ import numpy as np
 from pathrl.dataset.io import META_FILE, Dataset, DatasetError, check_destination, load_dataset, save_dataset
 from pathrl.robot.model import RobotSpec
 
-__all__ = ["FORMATS", "SUFFIXES", "as_dataset", "import_waypoints", "read_path_file", "read_waypoints"]
+__all__ = ["FORMATS", "LIMIT_TOL", "SUFFIXES", "as_dataset", "check_waypoints", "import_waypoints", "read_path_file",
+           "read_waypoints"]
 
 #: Import formats and the file suffixes each reads.
 SUFFIXES = {"csv": (".csv", ".txt"), "npy": (".npy",)}
@@ -172,7 +173,8 @@ def as_dataset(path: str | os.PathLike, robot: RobotSpec, cache_dir: str | os.Pa
     digest = hashlib.sha256(robot.name.encode() + repr(robot.pos_limits.tolist()).encode())
     for f in files:
         digest.update(f.name.encode() + f.read_bytes())
-    dest = Path(cache_dir or Path(tempfile.gettempdir()) / "pathrl-path-files") / f"{path.stem}-{digest.hexdigest()[:16]}"
+    root = Path(cache_dir) if cache_dir is not None else Path(tempfile.gettempdir()) / "pathrl-path-files"
+    dest = root / f"{path.stem}-{digest.hexdigest()[:16]}"
     if (dest / META_FILE).is_file():
         load_dataset(dest, robot)
         return dest

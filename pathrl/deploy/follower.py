@@ -206,6 +206,8 @@ class Follower:
             return build_pathset([clip_spline_into(resampled, lim[:, 0], lim[:, 1], paths.table_step)], ["path"])
         except PathOutsideError as exc:
             raise FollowerError(str(exc)) from None
+        except ValueError as exc:  # e.g. every knot clipped onto one point
+            raise FollowerError(f"the path clipped into the position range: {exc}") from None
 
     def _measured(self, q: np.ndarray) -> np.ndarray:
         """The robot's measured joint positions (D,) as float64, or a FollowerError."""
@@ -368,6 +370,11 @@ class Follower:
             return bool(env.braking[0]) and bool(is_stopped(env.vel, env.acc, env.cfg.stop_tolerance)[0])
         return (self._approach is not None and self._approach_t >= self._approach.duration
                 and self.final_error <= SETTLE_TOLERANCE)
+
+    @property
+    def final_approach_s(self) -> float:
+        """Duration (s) of the final approach planned for the current path (0 before the path's end)."""
+        return 0.0 if self._approach is None else self._approach.duration
 
     @property
     def final_error(self) -> float:
