@@ -17,7 +17,7 @@ from pathrl.envs.rewards import build_reward_terms
 from pathrl.envs.tracking import PathTrackingEnv
 from pathrl.limits.check import limit_violations
 from pathrl.limits.feasible import JointLimits
-from pathrl.paths.pathset import build_pathset
+from pathrl.paths.quick import quick_knots, quick_pathsets
 from pathrl.paths.segments import full_segments
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -28,11 +28,6 @@ DATASET = ROOT / "datasets" / "iiwa7" / "random"
 @pytest.fixture(scope="module")
 def follower():
     return Follower.load(MODEL)
-
-
-@pytest.fixture(scope="module")
-def clip_follower():
-    return Follower.load(MODEL, out_of_limits="clip")
 
 
 @pytest.fixture(scope="module")
@@ -56,7 +51,7 @@ def test_follower_steps_exactly_like_the_batched_env(follower, test_knots):
     """The same actions give bit-identical states in the follower and in row 1 of a 3-env batch; the policy's own
     decisions agree to float32 rounding."""
     follower.reset(test_knots[1])
-    paths = build_pathset([follower.knots.apply(k) for k in test_knots[:3]], ["a", "b", "c"])
+    paths = quick_pathsets([quick_knots(follower.knots, k) for k in test_knots[:3]], ["a", "b", "c"])
     env = PathTrackingEnv(replace(follower.env_cfg, num_envs=3), follower.robot, paths,
                           build_reward_terms(follower.cfg["reward"]["terms"]))
     env.start_segments(torch.arange(3), full_segments(paths, torch.arange(3)))
@@ -78,16 +73,19 @@ def test_follower_steps_exactly_like_the_batched_env(follower, test_knots):
 @settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(first=st.integers(0, 199), second=st.integers(0, 199), switch=st.integers(1, 60),
        stop_after=st.one_of(st.none(), st.integers(1, 30)))
-def test_path_changes_and_stops_keep_every_limit(clip_follower, test_knots, first, second, switch, stop_after):
-    """A path change at any decision (to a path that runs from the robot to another test path, clipped where the
-    spline through the robot's position leaves the range), and an optional stop after it: every setpoint within
+def test_path_changes_and_stops_keep_every_limit(follower, test_knots, first, second, switch, stop_after):
+    """A path change at any decision (to a path that runs from the robot to another test path; refused, changing
+    nothing, where its spline leaves the position range), and an optional stop after it: every setpoint within
     the position, velocity, acceleration and jerk limits; a stop ends at rest."""
-    follower = clip_follower
     follower.reset(test_knots[first])
     p1, v1, a1 = run(follower, switch)
     q = follower.state[0]
-    gap = follower.replace_path(np.vstack([q, test_knots[second]]))
-    assert gap < 0.05  # the new path starts at the robot (or, where clipping moved its start, close to it)
+    try:
+        gap = follower.replace_path(np.vstack([q, test_knots[second]]))
+        assert gap < 1e-9  # the new path starts at the robot
+    except FollowerError as exc:
+        assert "position range" in str(exc)
+        assert np.array_equal(follower.state[0], q)  # the old path goes on
     p2, v2, a2 = run(follower, 30 if stop_after is None else stop_after)
     parts = [(p1, v1, a1), (p2[1:], v2[1:], a2[1:])]
     if stop_after is not None:

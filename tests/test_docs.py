@@ -188,10 +188,12 @@ def check_dataset(args: list[str], monkeypatch) -> None:
     import pathrl.dataset.generate
     import pathrl.dataset.io
     import pathrl.dataset.kiemel
+    import pathrl.dataset.waypoints
     from pathrl.cli import dataset
 
     monkeypatch.setattr(pathrl.dataset.generate, "generate_dataset", _stop)
     monkeypatch.setattr(pathrl.dataset.kiemel, "import_kiemel", _stop)
+    monkeypatch.setattr(pathrl.dataset.waypoints, "import_waypoints", _stop)
     monkeypatch.setattr(pathrl.dataset.io, "load_dataset", _stop)
     _run_main(dataset.main, args)
 
@@ -258,6 +260,7 @@ def test_pathrl_command(cmd: Command, monkeypatch, capsys) -> None:
     if check is None:
         pytest.skip(f"{prog}: no argument check yet (its --help runs in test_every_cli_help)")
     monkeypatch.chdir(ROOT)
+    monkeypatch.setenv("PATHRL_ROBOT_PATH", str(ROOT / "examples" / "robots"))  # docs/your_robot.md's robots
     try:
         if prog == "pathrl-train":
             check(args, capsys)
@@ -283,6 +286,8 @@ def test_other_commands() -> None:
             assert dry.returncode == 0, f"{cmd.where}: {dry.stderr.strip()}"
         elif prog in ("python", "python3"):
             assert args and (ROOT / args[0]).is_file(), f"{cmd.where}: no such script {args[:1]}"
+        elif prog == "export":  # the robot path of docs/your_robot.md (test_pathrl_command sets it)
+            assert args == ["PATHRL_ROBOT_PATH=$PWD/examples/robots"], f"{cmd.where}: export {args}"
         elif not (ROOT / prog).is_file():
             unknown.append(f"{cmd.where}: {prog}")
     assert not unknown, "commands no test checks (add a check to tests/test_docs.py):\n" + "\n".join(unknown)

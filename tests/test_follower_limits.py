@@ -22,6 +22,7 @@ from pathrl.limits.integrate import interpolate_step
 from pathrl.paths.inside import PathOutsideError, clip_spline_into, keep_inside, spline_excess, table_excess
 from pathrl.paths.knots import KnotStrategy
 from pathrl.paths.pathset import build_pathset
+from pathrl.paths.quick import quick_knots
 from pathrl.paths.segments import sample_segments
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -120,7 +121,7 @@ def test_a_path_starting_outside_the_range_is_refused_and_changes_nothing(refuse
     with pytest.raises(FollowerError, match="position range"):
         refuse.replace_path(outside)
     assert all(np.array_equal(a, b) for a, b in zip(before, refuse.state, strict=True))
-    assert torch.equal(refuse.env.paths.knots[0, 0], torch.as_tensor(refuse.knots.apply(inside)[0]))
+    assert torch.equal(refuse.env.paths.knots[0, 0], torch.as_tensor(quick_knots(refuse.knots, inside)[0]))
 
 
 def test_a_path_starting_outside_the_range_is_clipped_and_followed_inside_every_limit(clip):
@@ -199,7 +200,8 @@ def test_every_setpoint_of_an_accepted_path_is_inside_every_limit(refuse, clip, 
         try:
             follower.reset(knots)
         except FollowerError as exc:
-            assert follower is refuse and "position range" in str(exc), str(exc)
+            msg = str(exc)  # clipping can leave one point (every knot outside on the same side): refused too
+            assert (follower is refuse and "position range" in msg) or "fewer than two distinct" in msg, msg
             continue
         p, v, a = _follow(follower, decisions=150)
         assert _violations(follower, p, v, a)["total"] == 0

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import json
 import os
 import platform
 import time
@@ -219,27 +220,94 @@ def _decision(robot_name: str, repeats: int) -> dict:
             "max_pct_of_step": 100 * t.max() / 0.1}
 
 
-def bench_follower(model: str, dataset: str, decisions: int = 400) -> dict:
-    """Decision latency of :class:`pathrl.deploy.Follower` (one thread): the shipped policy, the env's step and
-    the 24 setpoints, decision after decision along test paths (warm-up excluded)."""
+def _ms(wall: list[float], cpu: list[float]) -> dict:
+    """Mean / p99 / max of wall-clock and thread CPU times (s) in ms: on a shared machine the wall clock includes
+    the time the thread waited for a core, the CPU time does not."""
+    w, c = 1e3 * np.asarray(wall), 1e3 * np.asarray(cpu)
+    return {"mean_ms": w.mean(), "p99_ms": np.quantile(w, 0.99), "max_ms": w.max(),
+            "cpu_mean_ms": c.mean(), "cpu_p99_ms": np.quantile(c, 0.99), "cpu_max_ms": c.max()}
+
+
+def bench_follower(model: str, dataset: str, decisions: int = 400, changes: int = 100) -> dict:
+    """Latency of :class:`pathrl.deploy.Follower` on one thread (warm-up excluded): `decide()` (the shipped policy,
+    the env's step, the 24 setpoints; the final approach at path ends) decision after decision along test paths,
+    and `replace_path` mid-path to a path from the robot to another test path (those inside the position range; the
+    refused ones counted), given as knots and as a path `prepare`d beforehand."""
     from pathrl.dataset.io import load_dataset
-    from pathrl.deploy import Follower
+    from pathrl.deploy import Follower, FollowerError
 
     torch.set_num_threads(1)
     follower = Follower.load(model)
     paths = load_dataset(dataset, follower.robot).splits["test"].knots
-    times, k = [], 0
+    wall, cpu, k = [], [], 0
     follower.reset(paths[0])
-    while len(times) < decisions + 50:
+    while len(wall) < decisions + 50:
         if follower.done:
             k += 1
             follower.reset(paths[k % len(paths)])
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.thread_time()
         follower.decide()
-        times.append(time.perf_counter() - t0)
-    t = np.array(times[50:])
-    return {"model": model, "decisions": len(t), "mean_ms": 1e3 * t.mean(), "p99_ms": 1e3 * np.quantile(t, 0.99),
-            "max_ms": 1e3 * t.max()}
+        wall.append(time.perf_counter() - t0)
+        cpu.append(time.thread_time() - c0)
+    res = {"model": model, "decisions": decisions, **_ms(wall[50:], cpu[50:])}
+    idx = follower.robot.path_index
+    for kind in ("knots", "prepared"):
+        wall, cpu, refused, i = [], [], 0, 0
+        while len(wall) < changes + 5:
+            i += 1
+            follower.reset(paths[i % len(paths)])
+            for _ in range(10):
+                follower.decide()
+            new = np.vstack([follower.state[0][idx], paths[(i + 1) % len(paths)]])
+            try:  # a straight line from the robot to another path's start: refused where its spline leaves the range
+                prepared = follower.prepare(new)
+            except FollowerError:
+                refused += 1
+                continue
+            arg = prepared if kind == "prepared" else new
+            t0, c0 = time.perf_counter(), time.thread_time()
+            follower.replace_path(arg)
+            wall.append(time.perf_counter() - t0)
+            cpu.append(time.thread_time() - c0)
+        res[f"replace_path_{kind}"] = {"changes": changes, "refused": refused, **_ms(wall[5:], cpu[5:])}
+    return res
+
+
+def bench_follower_end(model: str, dataset: str, rate_hz: float = 240.0) -> dict:
+    """Every test path followed to its end by :class:`pathrl.deploy.Follower` with setpoints at `rate_hz`: the
+    final error (largest joint, rad) from the path's last knot, limit violations of every setpoint (position,
+    velocity, acceleration, jerk), the duration and the final approach."""
+    from pathrl.dataset.io import load_dataset
+    from pathrl.deploy import Follower
+    from pathrl.limits.check import limit_violations
+    from pathrl.limits.feasible import JointLimits
+
+    torch.set_num_threads(1)
+    follower = Follower.load(model, control_rate=rate_hz)
+    paths = load_dataset(dataset, follower.robot).splits["test"].knots
+    lim, idx = JointLimits.from_robot(follower.robot), follower.robot.path_index
+    errors, violations, durations, approach, from_rest, not_done = [], 0, [], [], 0, 0
+    for knots in paths:
+        follower.reset(knots)
+        ps, vs, accs = ([torch.as_tensor(x)[None]] for x in follower.state)
+        decisions = 0
+        while decisions < 1000:
+            sp, decisions = follower.decide(), decisions + 1
+            for lst, x in zip((ps, vs, accs), (sp.position, sp.velocity, sp.acceleration), strict=True):
+                lst.append(torch.as_tensor(x))
+            if follower.done:
+                break
+        not_done += not follower.done
+        violations += int(limit_violations(torch.cat(ps), torch.cat(vs), torch.cat(accs), lim, 1.0 / rate_hz)["total"])
+        errors.append(float(np.abs(follower.state[0][idx] - knots[-1]).max()))
+        durations.append(0.1 * decisions)
+        approach.append(follower.final_approach_s)
+        from_rest += follower.approach_from_rest
+    e = np.asarray(errors)
+    return {"model": model, "rate_hz": rate_hz, "paths": len(paths), "not_done": not_done,
+            "final_error_max": e.max(), "final_error_mean": e.mean(), "violations": violations,
+            "duration_mean_s": float(np.mean(durations)), "approach_mean_s": float(np.mean(approach)),
+            "approach_max_s": float(np.max(approach)), "approaches_from_rest": from_rest}
 
 
 def bench_ball_task(backend: str, num_envs: int, seconds: float, workers: int = 2) -> dict:
@@ -298,6 +366,9 @@ def main() -> None:
     ap.add_argument("--fuzz-steps", type=int, default=10_000_000,
                     help="adversarial limit fuzz: decision steps per robot (pathrl.eval.limit_fuzz)")
     ap.add_argument("--out", default=str(ROOT / "bench" / "results.json"))
+    ap.add_argument("--follower-only", action="store_true",
+                    help="only the follower: latency (decide, replace_path) and every test path to its end at "
+                         "100, 240 and 500 Hz; merged into --out")
     args = ap.parse_args()
     torch.set_num_threads(1)
     quick = args.quick
@@ -308,6 +379,13 @@ def main() -> None:
         ap.error(f"--limits: expected a comma-separated subset of native,torch,eager, got {args.limits!r}")
     res = {"machine": {"cpus": os.cpu_count(), "platform": platform.platform(), "torch": torch.__version__,
                        "native_limits": native.available()}}
+    if args.follower_only:
+        _follower_benches(res, quick)
+        out = Path(args.out)
+        old = json.loads(out.read_text()) if out.is_file() else {}
+        write_json_atomic(out, {**old, **res})
+        _print_follower(res)
+        return
     suffix = {"native": "", "torch": "_torch", "eager": "_eager"}
     for robot in ("iiwa7", "armar4_legs"):
         for mode in modes:
@@ -318,9 +396,7 @@ def main() -> None:
     for robot in ("iiwa7", "armar6", "armar4_legs"):
         for mode in modes:
             res[f"decision_{robot}{suffix[mode]}"] = bench_decision(robot, mode=mode)
-    for model, dataset in (("models/iiwa7_random", "datasets/iiwa7/random"),
-                           ("models/armar6_random", "datasets/armar6/random")):
-        res[f"follower_{Path(model).name}"] = bench_follower(model, dataset, 100 if quick else 400)
+    _follower_benches(res, quick)
     # the follower under adversarial paths, path changes, stops and bad measured states (pathrl.deploy.fuzz)
     res["follower_fuzz_iiwa7_random"] = asdict(fuzz_follower(ROOT / "models" / "iiwa7_random", 10 if quick else 300))
     from pathrl.eval.trueadapt_realtime import measure as adapt_decision  # TrueAdapt: policy + valid range, 50 ms
@@ -371,6 +447,51 @@ def main() -> None:
     _print(res, out)
 
 
+FOLLOWER_MODELS = (("models/iiwa7_random", "datasets/iiwa7/random"), ("models/armar6_random", "datasets/armar6/random"))
+FOLLOWER_END = (("models/iiwa7_random", "datasets/iiwa7/random"),
+                ("models/iiwa7_random_track_distill", "datasets/iiwa7/random"))
+
+
+def _follower_benches(res: dict, quick: bool) -> None:
+    """The follower's latency (both robots) and its path ends (iiwa7: both shipped random-path policies)."""
+    for model, dataset in FOLLOWER_MODELS:
+        res[f"follower_{Path(model).name}"] = bench_follower(model, dataset, 100 if quick else 400,
+                                                             10 if quick else 100)
+    if not quick:
+        for model, dataset in FOLLOWER_END:
+            for rate in (100, 240, 500):
+                res[f"follower_end_{Path(model).name}_{rate}hz"] = bench_follower_end(model, dataset, rate)
+
+
+def _print_follower(res: dict) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    t = Table(title="pathrl.deploy.Follower, 1 thread (wall clock; CPU time of the thread)")
+    t.add_column("benchmark")
+    t.add_column("result", justify="right")
+    _follower_rows(t, res)
+    Console().print(t)
+
+
+def _follower_rows(t, res: dict) -> None:
+    """Rows of the follower benchmarks."""
+    for k in sorted(k for k in res if k.startswith("follower_") and "decisions" in res[k]):
+        d = res[k]
+        t.add_row(f"Follower.decide, {d['model']}",
+                  f"{d['mean_ms']:.2f} ms mean, p99 {d['p99_ms']:.2f} (CPU p99 {d['cpu_p99_ms']:.2f})")
+        for kind in ("knots", "prepared"):
+            r = d.get(f"replace_path_{kind}")
+            if r:
+                t.add_row(f"Follower.replace_path ({kind}), {d['model']}",
+                          f"{r['mean_ms']:.2f} ms mean, p99 {r['p99_ms']:.2f} (CPU p99 {r['cpu_p99_ms']:.2f})")
+    for k in sorted(k for k in res if k.startswith("follower_end_")):
+        d = res[k]
+        t.add_row(f"Follower to the end, {d['model']}, {d['paths']} test paths at {d['rate_hz']:g} Hz",
+                  f"final error max {d['final_error_max']:.1e} rad, {d['violations']} violations, "
+                  f"{d['not_done']} not done, approach mean {d['approach_mean_s']:.2f} s")
+
+
 def _print(res: dict, out: Path) -> None:
     from rich.console import Console
     from rich.table import Table
@@ -407,10 +528,7 @@ def _print(res: dict, out: Path) -> None:
         d = res[k]
         t.add_row(f"policy + limits per decision, {d['robot']}, limits {d['limits']}",
                   f"{d['mean_ms']:.2f} ms (max {d['max_pct_of_step']:.1f} % of 0.1 s)")
-    for k in sorted(k for k in res if k.startswith("follower_") and "decisions" in res[k]):
-        d = res[k]
-        t.add_row(f"pathrl.deploy.Follower.decide, {d['model']}, 1 thread",
-                  f"{d['mean_ms']:.2f} ms mean (p99 {d['p99_ms']:.2f}, max {d['max_ms']:.2f})")
+    _follower_rows(t, res)
     f = res["follower_fuzz_iiwa7_random"]
     t.add_row(f"Follower fuzz, {Path(f['model']).name}: {f['trials']} adversarial paths ({f['refused']} refused "
               f"unclipped, all followed clipped), {f['path_changes']} path changes, {f['stops']} stops, "

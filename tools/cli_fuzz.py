@@ -70,6 +70,7 @@ def _c(name: str, program: str, args: str, expect: str, sub: bool = False) -> Ca
 
 EVAL, EXPORT, TOPPRA, DATASET, VIEW, IND = ("pathrl-eval", "pathrl-export", "pathrl-toppra", "pathrl-dataset",
                                             "pathrl-view", "pathrl-industrial")
+ROBOT = "pathrl-robot"
 TRAIN, TA_EVAL, TA_REC, TA_VAL = ("pathrl-train", "tools/trueadapt_eval.py", "tools/trueadapt_record.py",
                                   "tools/trueadapt_validation.py")
 _T = "dataset.path={fix}/tiny|iterations=1|env.num_envs=8|compile_limits=false|run_dir={fix}/runs/t|"
@@ -79,6 +80,10 @@ _I = "rows=[\"Type 1 Easy\"]|mpgd.k_max=1|"
 
 #: The fuzz table. Arguments are separated by ``|``.
 CASES: tuple[Case, ...] = (
+    _c("robot: no file", ROBOT, "check", "usage: pathrl-robot check FILE.yaml"),
+    _c("robot: missing file", ROBOT, "check|{fix}/nope.yaml", "cannot read"),
+    _c("robot: no urdf key", ROBOT, "check|{fix}/tiny/dataset.json", "robot.urdf is required"),
+    _c("robot: unknown command", ROBOT, "frob", "unknown command 'frob'"),
     _c("train: gamma < 0", TRAIN, _T + "agent.algorithm.gamma=-3", "agent.algorithm.gamma must be a number in (0, 1]"),
     _c("train: lambda > 1", TRAIN, _T + "agent.algorithm.lam=1.5", "agent.algorithm.lam must be"),
     _c("train: learning rate not a number", TRAIN, _T + "agent.algorithm.learning_rate=abc",
@@ -273,7 +278,7 @@ def _entry(program: str) -> Callable[[list[str]], int]:
     if program.startswith("tools/"):
         return _tool_main(program)
     module = {EVAL: "evaluate", EXPORT: "export", TOPPRA: "toppra", DATASET: "dataset", VIEW: "view",
-              IND: "industrial"}[program]
+              IND: "industrial", ROBOT: "robot"}[program]
     return importlib.import_module(f"pathrl.cli.{module}").main
 
 

@@ -3,6 +3,7 @@
     pathrl-dataset generate robot=iiwa7 dataset=random [dataset.num_train=N dataset.num_test=N
                             dataset.seed=S dataset.path=DIR workers=2 overwrite=true]
     pathrl-dataset import --format kiemel-json --robot ROBOT [--overwrite] SRC_DIR DEST
+    pathrl-dataset import --format csv|npy --robot ROBOT [--degrees] [--split test] [--overwrite] SRC DEST
     pathrl-dataset info DEST
 
 Bad input -> one line on stderr, exit code 2, nothing written.
@@ -134,27 +135,37 @@ def cmd_generate(overrides: Sequence[str]) -> None:
 
 
 def cmd_import(argv: Sequence[str]) -> None:
-    """``pathrl-dataset import --format kiemel-json --robot R SRC DEST``: convert paths in the format of the
-    paper's original code (:mod:`pathrl.dataset.kiemel`) into a dataset at DEST; print its summary and limit check."""
+    """``pathrl-dataset import --format FMT --robot R SRC DEST``: convert paths into a dataset at DEST: the paper's
+    original format (``kiemel-json``, :mod:`pathrl.dataset.kiemel`) or joint waypoints (``csv``, ``npy``: one file per
+    path, SRC a file or a directory; :mod:`pathrl.dataset.waypoints`); print its summary and limit check."""
     from pathrl.dataset.io import DatasetError
     from pathrl.dataset.kiemel import import_kiemel
+    from pathrl.dataset.waypoints import FORMATS, import_waypoints
     from pathrl.robot.model import RobotConfigError, load_robot_by_name
 
     ap = _Parser(prog="pathrl-dataset import", add_help=True)
-    ap.add_argument("--format", required=True, choices=["kiemel-json"])
+    ap.add_argument("--format", required=True, choices=["kiemel-json", *FORMATS])
     ap.add_argument("--robot", required=True, help="conf/robot name, e.g. iiwa7")
     ap.add_argument("--overwrite", action="store_true")
     ap.add_argument("--kind", default=None, help="dataset kind to record (default: source dir name)")
-    ap.add_argument("src_dir")
+    ap.add_argument("--degrees", action="store_true", help="csv/npy: the waypoints are in degrees (default radians)")
+    ap.add_argument("--split", default="test", help="csv/npy: the split the paths go to (default test)")
+    ap.add_argument("src_dir", help="kiemel-json: a directory; csv/npy: one path file or a directory of them")
     ap.add_argument("dest")
     args = ap.parse_args(list(argv))
+    if args.format == "kiemel-json" and (args.degrees or args.split != "test"):
+        raise UserError("pathrl-dataset import: --degrees and --split are for --format csv and npy")
     if Path(args.dest).exists() and not args.overwrite:
         raise UserError(f"{args.dest}: already exists (pass --overwrite to replace it)")
     output_dir(args.dest, "DEST")
     t0 = time.perf_counter()
     try:
         robot = load_robot_by_name(args.robot)
-        ds = import_kiemel(args.src_dir, args.dest, robot, overwrite=args.overwrite, kind=args.kind)
+        if args.format == "kiemel-json":
+            ds = import_kiemel(args.src_dir, args.dest, robot, overwrite=args.overwrite, kind=args.kind)
+        else:
+            ds = import_waypoints(args.src_dir, args.dest, robot, args.format, args.degrees, args.split,
+                                  args.overwrite, args.kind)
     except (DatasetError, RobotConfigError) as exc:
         raise UserError(str(exc)) from None
     print(f"imported {args.src_dir} -> {ds.path} in {time.perf_counter() - t0:.1f} s")

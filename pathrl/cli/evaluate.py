@@ -109,6 +109,24 @@ def output_of(cfg: dict[str, Any]) -> Path:
     return output_dir(out, "out", _OUTPUTS)
 
 
+def _path_files_as_dataset(run_dir: Path, dataset_path: str | None) -> str | None:
+    """`dataset_path`, or where it is a path file or a directory of them (CSV / NumPy waypoints, radians), the
+    dataset they were imported into for the run's robot (:func:`pathrl.dataset.waypoints.as_dataset`)."""
+    from pathrl.dataset.io import META_FILE
+    from pathrl.dataset.waypoints import as_dataset
+    from pathrl.eval.evaluate import load_run
+    from pathrl.robot.model import RobotConfigError, load_robot
+
+    if dataset_path is None or (Path(dataset_path) / META_FILE).is_file() or not Path(dataset_path).exists():
+        return dataset_path
+    run_cfg, _, _ = load_run(run_dir)
+    try:
+        robot = load_robot(run_cfg["robot"])
+    except (RobotConfigError, KeyError, ValueError) as exc:
+        raise UserError(f"{run_dir}: robot: {exc}") from None
+    return str(as_dataset(dataset_path, robot))
+
+
 def _main(argv: list[str]) -> None:
     from pathrl.dataset.io import DatasetError
     from pathrl.eval.evaluate import RunError, evaluate, load_run
@@ -127,6 +145,7 @@ def _main(argv: list[str]) -> None:
             raise UserError(str(exc)) from None
         dataset_path = str(Path("data") / run_cfg["robot"]["name"] / cfg["dataset"]["name"])
     try:
+        dataset_path = _path_files_as_dataset(run_dir, dataset_path)
         m = evaluate(run_dir, dataset_path, cfg["split"], cfg["episodes"], cfg["segments"], cfg["seed"],
                      out, num_envs=cfg["num_envs"],
                      record=cfg["record"], task=cfg["task"], backend=cfg["backend"],

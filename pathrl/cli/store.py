@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import sys
+
 from hydra.core.config_store import ConfigStore
 from omegaconf import DictConfig, OmegaConf
 
@@ -27,6 +29,20 @@ def _train_app_node() -> DictConfig:
     return node
 
 
+def _register_robot_files(cs: ConfigStore) -> None:
+    """Every robot YAML on ``PATHRL_ROBOT_PATH`` as option ``robot=<its stem>`` (:mod:`pathrl.robot.external`); a
+    broken one: its one-line error, exit 2."""
+    from pathrl.robot.external import expand_robot_file, robot_files
+    from pathrl.robot.model import RobotConfigError
+
+    try:
+        for name, path in robot_files().items():
+            cs.store(group="robot", name=name, node=expand_robot_file(path))
+    except RobotConfigError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        raise SystemExit(2) from None
+
+
 def register() -> None:
     """The schemas, and a ``sweep/<table>`` config per sweeps/<table>.yaml that names experiments to train (a
     broken sweeps/ file: its one-line error, exit 1)."""
@@ -45,6 +61,7 @@ def register() -> None:
     cs.store(group="robot", name="robot_schema", node=schema.RobotCfg)
     cs.store(group="dataset", name="dataset_schema", node=schema.DatasetCfg)
     cs.store(group="knots", name="knots_schema", node=schema.KnotsCfg)
+    _register_robot_files(cs)
     for name, spec in SWEEPS.items():
         if spec.train:
             cs.store(group="sweep", name=name, node=sweep_node(spec.train), package="_global_")

@@ -154,6 +154,21 @@ def print_summary(report: dict[str, Any], out: Path) -> None:
     print(f"wrote {out}")
 
 
+def _checked_segments(cfg: Any, protocols: Sequence[str]) -> str:
+    """The segment protocol of `cfg` after checking it, the episode and worker counts and the control rate
+    (UserError: one line)."""
+    segments = str(cfg.segments)
+    if segments not in protocols:
+        raise UserError(f"segments must be one of {list(protocols)}, got {segments!r}")
+    if cfg.episodes is not None and int(cfg.episodes) < 1:
+        raise UserError(f"episodes must be >= 1, got {cfg.episodes}")
+    if int(cfg.workers) < 1:
+        raise UserError(f"workers must be >= 1, got {cfg.workers}")
+    if not float(cfg.control_rate) > 0:
+        raise UserError(f"control_rate must be > 0, got {cfg.control_rate}")
+    return segments
+
+
 def main_(argv: list[str]) -> dict[str, Any]:
     """Run the baseline; returns the report (also written to ``out``); ``-h`` / ``--help`` prints the usage."""
     if any(a in ("-h", "--help") for a in argv):
@@ -163,25 +178,21 @@ def main_(argv: list[str]) -> dict[str, Any]:
 
     cfg = compose("toppra_app", argv, ToppraAppCfg)
     from pathrl.dataset.io import DatasetError, load_dataset, load_pathset
+    from pathrl.dataset.waypoints import as_dataset
     from pathrl.paths.knots import KnotStrategy
     from pathrl.paths.segments import PROTOCOLS, evaluation_plan
     from pathrl.robot.model import RobotConfigError, load_robot
 
-    segments = str(cfg.segments)
-    if segments not in PROTOCOLS:
-        raise UserError(f"segments must be one of {list(PROTOCOLS)}, got {segments!r}")
-    if cfg.episodes is not None and int(cfg.episodes) < 1:
-        raise UserError(f"episodes must be >= 1, got {cfg.episodes}")
-    if int(cfg.workers) < 1:
-        raise UserError(f"workers must be >= 1, got {cfg.workers}")
-    if not float(cfg.control_rate) > 0:
-        raise UserError(f"control_rate must be > 0, got {cfg.control_rate}")
+    segments = _checked_segments(cfg, PROTOCOLS)
     try:
         robot = load_robot(to_container(cfg.robot))
         knots = KnotStrategy.from_cfg(to_container(cfg.knots))
     except (RobotConfigError, ValueError) as exc:
         raise UserError(str(exc)) from None
-    data_dir = Path(str(cfg.dataset.path))
+    try:  # a path file (or a directory of them) is imported into a dataset first
+        data_dir = as_dataset(Path(str(cfg.dataset.path)), robot)
+    except DatasetError as exc:
+        raise UserError(str(exc)) from None
     out = output_file(str(cfg.out) if cfg.out else data_dir / f"toppra_{cfg.split}_{segments}.json", "out")
     try:
         dataset = load_dataset(data_dir, robot)

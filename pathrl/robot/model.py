@@ -136,12 +136,18 @@ def load_robot(cfg: Mapping[str, Any]) -> RobotSpec:
 
 
 def load_robot_by_name(name: str, conf_dir: Path = CONF_DIR) -> RobotSpec:
-    """Load ``conf/robot/<name>.yaml`` (outside Hydra: tests, tools, notebooks)."""
+    """Load ``conf/robot/<name>.yaml``, or a robot YAML on ``PATHRL_ROBOT_PATH`` (outside Hydra: tests, tools,
+    notebooks)."""
     from omegaconf import OmegaConf
 
     path = conf_dir / "robot" / f"{name}.yaml"
     if not path.is_file():
-        choices = sorted(p.stem for p in (conf_dir / "robot").glob("*.yaml"))
-        raise RobotConfigError(f"unknown robot {name!r}; choose one of {choices}")
+        from pathrl.robot.external import expand_robot_file, robot_files
+
+        external = robot_files()
+        if name in external:  # a robot YAML on PATHRL_ROBOT_PATH (pathrl.robot.external)
+            return load_robot(expand_robot_file(external[name]))
+        choices = sorted({p.stem for p in (conf_dir / "robot").glob("*.yaml")} | set(external))
+        raise RobotConfigError(f"unknown robot {name!r}; choose one of {choices} (more: PATHRL_ROBOT_PATH)")
     cfg = OmegaConf.to_container(OmegaConf.load(path), resolve=True)
     return load_robot(cfg)
