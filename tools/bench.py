@@ -397,8 +397,6 @@ def main() -> None:
         for mode in modes:
             res[f"decision_{robot}{suffix[mode]}"] = bench_decision(robot, mode=mode)
     _follower_benches(res, quick)
-    # the follower under adversarial paths, path changes, stops and bad measured states (pathrl.deploy.fuzz)
-    res["follower_fuzz_iiwa7_random"] = asdict(fuzz_follower(ROOT / "models" / "iiwa7_random", 10 if quick else 300))
     from pathrl.eval.trueadapt_realtime import measure as adapt_decision  # TrueAdapt: policy + valid range, 50 ms
     from pathrl.repro import trueadapt as adapt
 
@@ -461,6 +459,8 @@ def _follower_benches(res: dict, quick: bool) -> None:
         for model, dataset in FOLLOWER_END:
             for rate in (100, 240, 500):
                 res[f"follower_end_{Path(model).name}_{rate}hz"] = bench_follower_end(model, dataset, rate)
+    # the follower under adversarial paths, path changes, stops and bad measured states (pathrl.deploy.fuzz)
+    res["follower_fuzz_iiwa7_random"] = asdict(fuzz_follower(ROOT / "models" / "iiwa7_random", 10 if quick else 300))
 
 
 def _print_follower(res: dict) -> None:
@@ -490,6 +490,12 @@ def _follower_rows(t, res: dict) -> None:
         t.add_row(f"Follower to the end, {d['model']}, {d['paths']} test paths at {d['rate_hz']:g} Hz",
                   f"final error max {d['final_error_max']:.1e} rad, {d['violations']} violations, "
                   f"{d['not_done']} not done, approach mean {d['approach_mean_s']:.2f} s")
+    f = res.get("follower_fuzz_iiwa7_random")
+    if f:
+        t.add_row(f"Follower fuzz, {Path(f['model']).name}: {f['trials']} adversarial paths ({f['refused']} refused "
+                  f"unclipped, all followed clipped), {f['path_changes']} path changes, {f['stops']} stops, "
+                  f"{f['bad_states_refused']} bad states refused, {f['crashes']} crashes",
+                  f"{f['violations']} violations in {f['setpoints_checked']:,} setpoint values")
 
 
 def _print(res: dict, out: Path) -> None:
@@ -529,11 +535,6 @@ def _print(res: dict, out: Path) -> None:
         t.add_row(f"policy + limits per decision, {d['robot']}, limits {d['limits']}",
                   f"{d['mean_ms']:.2f} ms (max {d['max_pct_of_step']:.1f} % of 0.1 s)")
     _follower_rows(t, res)
-    f = res["follower_fuzz_iiwa7_random"]
-    t.add_row(f"Follower fuzz, {Path(f['model']).name}: {f['trials']} adversarial paths ({f['refused']} refused "
-              f"unclipped, all followed clipped), {f['path_changes']} path changes, {f['stops']} stops, "
-              f"{f['bad_states_refused']} bad states refused, {f['crashes']} crashes",
-              f"{f['violations']} violations in {f['setpoints_checked']:,} setpoint values")
     d = res["trueadapt_decision"]
     t.add_row(f"TrueAdapt decision (policy + valid range + setpoints), {Path(d['model']).name}, 1 thread",
               f"{d['decision_ms_mean']:.2f} ms mean (max {d['decision_ms_max']:.2f}; valid range max "

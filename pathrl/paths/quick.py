@@ -16,7 +16,7 @@ from scipy.interpolate import CubicSpline, PPoly
 
 from pathrl.paths.knots import KnotStrategy
 from pathrl.paths.pathset import PathSet
-from pathrl.paths.spline import ARC_LENGTH_STEP, PathError, chord_params, dedupe_knots
+from pathrl.paths.spline import ARC_LENGTH_STEP, PathError, chord_params, dedupe_knots, place_knots
 
 __all__ = ["quick_knots", "quick_pathset", "quick_pathsets"]
 
@@ -40,25 +40,12 @@ def _arc(spline: PPoly, knots: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return u, np.r_[0.0, np.cumsum(np.sqrt(np.einsum("ij,ij->i", dq, dq)))]
 
 
-def _place(spline: PPoly, u: np.ndarray, measure: np.ndarray, spacing: float) -> np.ndarray:
-    """Knots where the cumulative `measure` crosses 0, spacing, 2 spacing, ..., plus the end."""
-    total = measure[-1]
-    targets = np.arange(0.0, total, spacing)
-    if len(targets) > 1 and total - targets[-1] < 1e-9:
-        targets = targets[:-1]
-    targets = np.r_[0.0, targets[1:], total]
-    ramp = np.linspace(0.0, 1e-12 * max(total, 1.0), len(measure))
-    at = np.interp(targets, measure + ramp, u)
-    at[0], at[-1] = u[0], u[-1]
-    return spline(at)
-
-
 def _by_distance(knots: np.ndarray, spacing: float) -> np.ndarray:
     """Knots every `spacing` rad of arc length along the spline through `knots` (K, M). -> (K', M)"""
     knots = dedupe_knots(knots)
     spline = _fit(knots)
     u, s = _arc(spline, knots)
-    return dedupe_knots(_place(spline, u, s, spacing))
+    return dedupe_knots(place_knots(spline, u, s, spacing))
 
 
 def _by_curvature(knots: np.ndarray, spacing: float, base_spacing: float, step: float = 2e-3) -> np.ndarray:
@@ -79,7 +66,7 @@ def _by_curvature(knots: np.ndarray, spacing: float, base_spacing: float, step: 
         kappa = np.sqrt(np.einsum("ij,ij->i", dt, dt)) / np.diff(mid)
         kappa = np.r_[kappa[0], kappa, kappa[-1]]
         cum = np.r_[0.0, np.cumsum(0.5 * (kappa[1:] + kappa[:-1]) * ds)]
-    return dedupe_knots(_place(spline, ug, cum, spacing))
+    return dedupe_knots(place_knots(spline, ug, cum, spacing))
 
 
 def quick_knots(strategy: KnotStrategy, knots: np.ndarray) -> np.ndarray:

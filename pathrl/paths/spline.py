@@ -8,13 +8,15 @@ These functions work on one path with numpy/scipy; :mod:`pathrl.paths.pathset` b
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 from scipy.interpolate import BSpline, make_interp_spline
 
 __all__ = [
     "ARC_LENGTH_STEP", "PathError", "arc_length_table", "chord_params", "curvature_along", "dedupe_knots", "fit_spline",
-    "integrated_curvature", "knot_arc_lengths", "resample_by_curvature", "resample_by_distance", "sample_uniform",
-    "tabulate",
+    "integrated_curvature", "knot_arc_lengths", "place_knots", "resample_by_curvature", "resample_by_distance",
+    "sample_uniform", "tabulate",
 ]
 
 #: Parameter step of the dense polyline used to measure arc length, per rad of chord length.
@@ -93,8 +95,10 @@ def sample_uniform(knots: np.ndarray, step: float) -> tuple[np.ndarray, float]:
     return table, length
 
 
-def _place_knots(spline: BSpline, u: np.ndarray, measure: np.ndarray, spacing: float) -> np.ndarray:
-    """Knots where the cumulative `measure` crosses 0, spacing, 2 spacing, ..., plus the end."""
+def place_knots(spline: Callable[[np.ndarray], np.ndarray], u: np.ndarray, measure: np.ndarray,
+                spacing: float) -> np.ndarray:
+    """Knots (K', M) where the cumulative `measure` (at parameters `u`) crosses 0, spacing, 2 spacing, ..., plus the
+    path's end; `spline` maps parameters to positions."""
     total = measure[-1]
     targets = np.arange(0.0, total, spacing)
     if len(targets) > 1 and total - targets[-1] < 1e-9:
@@ -114,7 +118,7 @@ def resample_by_distance(knots: np.ndarray, spacing: float) -> np.ndarray:
     knots = dedupe_knots(knots)
     spline = fit_spline(knots)
     u, s = arc_length_table(spline, knots)
-    return dedupe_knots(_place_knots(spline, u, s, spacing))
+    return dedupe_knots(place_knots(spline, u, s, spacing))
 
 
 def integrated_curvature(knots: np.ndarray, step: float = 2e-3) -> tuple[np.ndarray, np.ndarray, BSpline]:
@@ -157,4 +161,4 @@ def resample_by_curvature(knots: np.ndarray, spacing: float, base_spacing: float
         raise PathError(f"curvature spacing must be > 0, got {spacing}")
     base = resample_by_distance(knots, base_spacing)
     ug, cum, spline = integrated_curvature(base)
-    return dedupe_knots(_place_knots(spline, ug, cum, spacing))
+    return dedupe_knots(place_knots(spline, ug, cum, spacing))
