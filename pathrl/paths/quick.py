@@ -16,7 +16,14 @@ from scipy.interpolate import CubicSpline, PPoly
 
 from pathrl.paths.knots import KnotStrategy
 from pathrl.paths.pathset import PathSet
-from pathrl.paths.spline import ARC_LENGTH_STEP, PathError, chord_params, dedupe_knots, place_knots
+from pathrl.paths.spline import (
+    ARC_LENGTH_STEP,
+    PathError,
+    chord_params,
+    curvature_integral,
+    dedupe_knots,
+    place_knots,
+)
 
 __all__ = ["quick_knots", "quick_pathset", "quick_pathsets"]
 
@@ -55,18 +62,7 @@ def _by_curvature(knots: np.ndarray, spacing: float, base_spacing: float, step: 
     u, s = _arc(spline, base)
     grid = np.r_[np.arange(0.0, s[-1], step), s[-1]]
     ug = np.interp(grid, s, u)
-    q = spline(ug)
-    ds = np.diff(grid)
-    tangent = np.diff(q, axis=0) / ds[:, None]
-    mid = 0.5 * (grid[1:] + grid[:-1])
-    if len(mid) < 2:
-        cum = np.zeros_like(grid)
-    else:
-        dt = np.diff(tangent, axis=0)
-        kappa = np.sqrt(np.einsum("ij,ij->i", dt, dt)) / np.diff(mid)
-        kappa = np.r_[kappa[0], kappa, kappa[-1]]
-        cum = np.r_[0.0, np.cumsum(0.5 * (kappa[1:] + kappa[:-1]) * ds)]
-    return dedupe_knots(place_knots(spline, ug, cum, spacing))
+    return dedupe_knots(place_knots(spline, ug, curvature_integral(grid, spline(ug)), spacing))
 
 
 def quick_knots(strategy: KnotStrategy, knots: np.ndarray) -> np.ndarray:

@@ -14,9 +14,9 @@ import numpy as np
 from scipy.interpolate import BSpline, make_interp_spline
 
 __all__ = [
-    "ARC_LENGTH_STEP", "PathError", "arc_length_table", "chord_params", "curvature_along", "dedupe_knots", "fit_spline",
-    "integrated_curvature", "knot_arc_lengths", "place_knots", "resample_by_curvature", "resample_by_distance",
-    "sample_uniform", "tabulate",
+    "ARC_LENGTH_STEP", "PathError", "arc_length_table", "chord_params", "curvature_along", "curvature_integral",
+    "dedupe_knots", "fit_spline", "integrated_curvature", "knot_arc_lengths", "place_knots", "resample_by_curvature",
+    "resample_by_distance", "sample_uniform", "tabulate",
 ]
 
 #: Parameter step of the dense polyline used to measure arc length, per rad of chord length.
@@ -131,16 +131,20 @@ def integrated_curvature(knots: np.ndarray, step: float = 2e-3) -> tuple[np.ndar
     u, s = arc_length_table(spline, knots)
     grid = np.r_[np.arange(0.0, s[-1], step), s[-1]]
     ug = np.interp(grid, s, u)
-    q = spline(ug)
+    return ug, curvature_integral(grid, spline(ug)), spline
+
+
+def curvature_integral(grid: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """Cumulative integral of |d^2 q / ds^2| (S,) of positions `q` (S, M) at arc lengths `grid` (S,) (finite
+    differences, trapezoids; zeros for fewer than three samples)."""
     ds = np.diff(grid)
     tangent = np.diff(q, axis=0) / ds[:, None]
     mid = 0.5 * (grid[1:] + grid[:-1])
     if len(mid) < 2:
-        return ug, np.zeros_like(grid), spline
+        return np.zeros_like(grid)
     kappa = np.linalg.norm(np.diff(tangent, axis=0), axis=1) / np.diff(mid)  # at interior grid points
     kappa = np.r_[kappa[0], kappa, kappa[-1]]
-    cum = np.r_[0.0, np.cumsum(0.5 * (kappa[1:] + kappa[:-1]) * ds)]
-    return ug, cum, spline
+    return np.r_[0.0, np.cumsum(0.5 * (kappa[1:] + kappa[:-1]) * ds)]
 
 
 def curvature_along(knots: np.ndarray, step: float = 2e-3) -> tuple[np.ndarray, np.ndarray]:
