@@ -460,7 +460,8 @@ def _follower_benches(res: dict, quick: bool) -> None:
             for rate in (100, 240, 500):
                 res[f"follower_end_{Path(model).name}_{rate}hz"] = bench_follower_end(model, dataset, rate)
     # the follower under adversarial paths, path changes, stops and bad measured states (pathrl.deploy.fuzz)
-    res["follower_fuzz_iiwa7_random"] = asdict(fuzz_follower(ROOT / "models" / "iiwa7_random", 10 if quick else 300))
+    fuzz = fuzz_follower(ROOT / "models" / "iiwa7_random", 10 if quick else 300)
+    res["follower_fuzz_iiwa7_random"] = {**asdict(fuzz), "model": "models/iiwa7_random"}
 
 
 def _print_follower(res: dict) -> None:
