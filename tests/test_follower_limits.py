@@ -273,7 +273,7 @@ def test_the_follower_fuzz_finds_nothing_and_sees_a_follower_without_the_check(m
     assert res.crashes == 0 and res.violations == 0 and res.bad_states_refused == res.trials == 8
     assert res.refused > 0 and res.setpoints_checked > 0
     no_check = lambda paths, lo, hi, chunk=256: torch.zeros(paths.num_paths, dtype=torch.float64)  # noqa: E731
-    monkeypatch.setattr("pathrl.deploy.follower.table_excess", no_check)
+    monkeypatch.setattr("pathrl.paths.inside.table_excess", no_check)
     monkeypatch.setattr("pathrl.envs.tracking.table_excess", no_check)
     broken = fuzz_follower(MODEL, 8, seed=3, decisions=60)
     assert broken.violations > 0

@@ -39,9 +39,9 @@ from pathrl.envs.tracking_cfg import TrackingEnvCfg
 from pathrl.eval.evaluate import load_policy, load_run
 from pathrl.limits.braking import is_stopped
 from pathrl.limits.integrate import interpolate_step
-from pathrl.paths.inside import INSIDE_TOL, PathOutsideError, clip_spline_into, table_excess
+from pathrl.paths.inside import INSIDE_TOL, PathOutsideError, keep_inside
 from pathrl.paths.knots import KnotStrategy
-from pathrl.paths.pathset import PathSet, build_pathset
+from pathrl.paths.pathset import PathSet
 from pathrl.paths.quick import quick_knots, quick_pathset
 from pathrl.paths.segments import full_segments
 from pathrl.robot.model import RobotSpec, load_robot
@@ -195,17 +195,16 @@ class Follower:
         except ValueError as exc:
             raise FollowerError(f"path knots: {exc}") from None
         lim = self.robot.pos_limits[self.robot.path_index]
-        excess = float(table_excess(paths, torch.as_tensor(lim[:, 0]), torch.as_tensor(lim[:, 1]))[0])
-        if excess <= (INSIDE_TOL if self.out_of_limits == "refuse" else 0.0):
-            return paths
-        if self.out_of_limits == "refuse":
-            raise FollowerError(f"the path leaves robot {self.robot.name}'s position range by up to "
-                                f"{1e3 * excess:.3g} mrad (at or between its knots); refused (out_of_limits='clip' "
-                                "clips it)")
+        refuse = self.out_of_limits == "refuse"
         try:
-            return build_pathset([clip_spline_into(resampled, lim[:, 0], lim[:, 1], paths.table_step)], ["path"])
+            return keep_inside(paths, [resampled], lim[:, 0], lim[:, 1], clip=not refuse,
+                               tol=INSIDE_TOL if refuse else 0.0)
         except PathOutsideError as exc:
-            raise FollowerError(str(exc)) from None
+            if exc.excess is None:  # clipping did not bring it inside
+                raise FollowerError(str(exc)) from None
+            raise FollowerError(f"the path leaves robot {self.robot.name}'s position range by up to "
+                                f"{1e3 * exc.excess:.3g} mrad (at or between its knots); refused (out_of_limits='clip' "
+                                "clips it)") from None
         except ValueError as exc:  # e.g. every knot clipped onto one point
             raise FollowerError(f"the path clipped into the position range: {exc}") from None
 

@@ -22,7 +22,12 @@ INSIDE_TOL = 1e-6
 
 
 class PathOutsideError(ValueError):
-    """A path that cannot be brought inside a position range (one line)."""
+    """A path that leaves a position range, or cannot be brought inside it (one line); `excess` (rad): how far the
+    worst path leaves it, where that was measured."""
+
+    def __init__(self, message: str, excess: float | None = None):
+        super().__init__(message)
+        self.excess = excess
 
 
 def spline_excess(knots: np.ndarray, lo: np.ndarray, hi: np.ndarray, step: float) -> tuple[np.ndarray, np.ndarray]:
@@ -88,7 +93,7 @@ def keep_inside(paths: PathSet, knots_list: list[np.ndarray], lo: np.ndarray, hi
         return paths
     if not clip:
         raise PathOutsideError(f"{len(bad)} of {paths.num_paths} paths leave the position range (by up to "
-                               f"{1e3 * float(excess.max()):.3g} mrad, at or between their knots)")
+                               f"{1e3 * float(excess.max()):.3g} mrad, at or between their knots)", float(excess.max()))
     knots_list = list(knots_list)
     for i in bad:
         knots_list[i] = clip_spline_into(knots_list[i], lo, hi, paths.table_step)
