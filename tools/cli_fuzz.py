@@ -236,15 +236,21 @@ _SKIPPED = ("__pycache__", ".cache")
 
 
 def _snapshot(roots: Sequence[Path]) -> dict[str, tuple[bool, int, int]]:
-    """Every file and directory under `roots` (:data:`_SKIPPED` excepted): (is a dir, size, mtime ns)."""
+    """Every file and directory under `roots` (:data:`_SKIPPED` excepted): (is a dir, size, mtime ns).
+
+    A directory counts by its existence only: its size and mtime change whenever an entry is added or removed, a
+    skipped one included (another worker's first ``.cache``), and the entries themselves are in the snapshot.
+    """
     out = {}
     for root in roots:
         for dirpath, dirnames, filenames in os.walk(root):
             dirnames[:] = [d for d in dirnames if d not in _SKIPPED]
-            for name in dirnames + filenames:
+            for name in dirnames:
+                out[os.path.join(dirpath, name)] = (True, 0, 0)
+            for name in filenames:
                 p = os.path.join(dirpath, name)
                 st = os.lstat(p)
-                out[p] = (os.path.isdir(p), st.st_size, st.st_mtime_ns)
+                out[p] = (False, st.st_size, st.st_mtime_ns)
     return out
 
 
