@@ -181,7 +181,7 @@ def test_quick_profile_trains_evaluates_and_renders(tmp_path):
 
 
 def test_training_record_names_the_method_from_the_shipped_config(tmp_path):
-    """PPO for a PPO run, "DAgger from <teacher>" for a distilled student; no summary: None."""
+    """PPO from scratch or from a warm start for a PPO run, "DAgger from <teacher>" for a distilled student; no summary: None."""
     ppo, student = tmp_path / "ppo", tmp_path / "student"
     for d, cfg in ((ppo, {"agent": {"algorithm": {"class_name": "PPO"}}}),
                    (student, {"agent": {"algorithm": {"class_name": "Distillation"}},
@@ -189,7 +189,11 @@ def test_training_record_names_the_method_from_the_shipped_config(tmp_path):
         d.mkdir()
         (d / "summary.json").write_text(json.dumps({"iterations": 3}))
         (d / "config.yaml").write_text(yaml.safe_dump(cfg))
-    assert training_record(ppo) == {"iterations": 3, "method": "PPO"}
+    assert training_record(ppo) == {"iterations": 3, "method": "PPO from scratch"}
+    assert training_method({"agent": {"algorithm": {"class_name": "PPO"}}, "init_from": "models/iiwa7_random/"}) \
+        == "PPO from iiwa7_random"
+    assert training_method({"residual": {"scale": 0.25, "controller": {"name": "tray"}}}) \
+        == "PPO residual over tray, from scratch"
     assert training_record(student)["method"] == "DAgger from law_tracker"
     assert training_record(tmp_path / "nothing") is None
     assert training_method({"controller": {"name": "greedy"}, "agent": {"algorithm": {"class_name": "PPO"}}}) \

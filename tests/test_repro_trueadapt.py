@@ -22,6 +22,7 @@ FAKE = {  # one on-plate row, one in-place row, the validation
             "success": 1.0, "fraction": 1.0, "offset": 0.0099, "acc": 0.038, "jerk": 0.0304, "episodes": 1000,
             "backend": "pybullet", "limit_violations": 2},
     },
+    "trueadapt_training": {"iiwa7_trueadapt_in_place_tray_controller": {"method": "not trained (trueadapt_tray)"}},
     "trueadapt_validation": [{"mode": "random", "trajectories": 100000, "steps": 100, "setpoints_checked": 840000000,
                               "violations": {"total": 0}, "seconds": 104.4}],
 }
@@ -35,15 +36,16 @@ def test_renderer_hand_checked_cells():
     md, rows = adapt.markdown(FAKE)
     # ours in percent / the paper's; on plate the error distance is not the task's metric: ours in brackets
     assert _line(md, "on plate: reference trajectories (no adaptations)") == (
-        "| on plate: reference trajectories (no adaptations) | the reference replayed | **5.0** / 4.2 | "
+        "| on plate: reference trajectories (no adaptations) | the reference replayed | not trained (reference "
+        "replayed) | **5.0** / 4.2 | "
         "**37.5** / 40.4 | (4.3) | **2.2** / 1.7 | **0.3** / 0.5 | pybullet | 1000 | 0 |")
     # a row of ours only (no paper value): bold, no slash; in place the error distance is the metric (cm)
     assert _line(md, "in place: model-based tray controller") == (
         "| in place: model-based tray controller | **tray controller: privileged information, not in the paper** | "
-        "**100.0** | **100.0** | **1.0** | **3.8** | **3.0** | pybullet | 1000 | 2 |")
+        "not trained (trueadapt_tray) | **100.0** | **100.0** | **1.0** | **3.8** | **3.0** | pybullet | 1000 | 2 |")
     # a paper row without a policy of ours: dashes and the paper's value
     assert _line(md, "in place: TrueAdapt, real robot") == (
-        "| in place: TrueAdapt, real robot | no real robot | – / 82.0 | – / 96.1 | – / 1.7 | – / 6.9 | – / 3.6 | – | – "
+        "| in place: TrueAdapt, real robot | no real robot | – | – / 82.0 | – / 96.1 | – / 1.7 | – / 6.9 | – / 3.6 | – | – "
         "| – |")
     # a second policy of ours for one paper row: its own line and CSV key, the paper's values of that row beside it
     ppo = next(ln for ln in md if ln.startswith("| on plate: TrueAdapt, test set | distilled policy + PPO"))
@@ -138,3 +140,26 @@ def test_limit_counter_checks_every_setpoint_and_finds_violations():
         counts.append(counter.counts)
     assert counts[0]["total"] == 0
     assert counts[1]["velocity"] > 0 and counts[1]["total"] == counts[1]["velocity"]
+
+
+def test_every_seed_of_the_from_scratch_runs_and_the_method_column(tmp_path):
+    """The committed per-seed evaluations are found by name (other files ignored) and rendered one line per
+    experiment, seeds in order, with the mean success; a row's method is its shipped config's."""
+    m = {"success": 0.5, "fraction": 0.9, "acc": 0.03, "jerk": 0.01, "limit_violations": 0}
+    for name, success in (("exp_a_seed1", 0.9), ("exp_a_seed0", 0.6), ("exp_b_seed0", 0.2)):
+        (tmp_path / f"{name}_pybullet_metrics.json").write_text(json.dumps({**m, "success": success}))
+    (tmp_path / "exp_a_seed0.csv").write_text("iteration\n0\n")
+    (tmp_path / "notes_pybullet_metrics.json").write_text("{}")
+    seeds = adapt.seed_results(tmp_path)
+    assert {k: sorted(v) for k, v in seeds.items()} == {"exp_a": [0, 1], "exp_b": [0]}
+    md = adapt.seeds_markdown(seeds)
+    assert "| `exp_a` | 0, 1 | 60.0 / 90.0 | 75.0 | 90.0 / 90.0 | 3.0 / 3.0 | 1.0 / 1.0 | 0 |" in md
+    assert adapt.seeds_markdown({}) == [] and adapt.seed_results(tmp_path / "missing") == {}
+    row = adapt._scratch_row("no_current_position", "state without current position", "no_position")
+    assert row.evaluation.model == "iiwa7_trueadapt_on_plate_ppo_scratch_no_position"
+    assert adapt.method({"training": {row.evaluation.model: {"method": "PPO from scratch"}}}, row) == "PPO from scratch"
+    assert adapt.method({}, row) == "–"
+    # every from-scratch ablation row names an experiment that exists
+    for r in adapt.ROWS:
+        if r.key.endswith("_scratch"):
+            assert (ROOT / "pathrl" / "conf" / "experiment" / f"{r.evaluation.model}.yaml").is_file(), r.key

@@ -391,7 +391,7 @@ def collect(lay: Layout) -> dict:
         p = lay.out / "raw" / f"realtime_{key}.json"
         if p.is_file():
             res["realtime"][key] = json.loads(p.read_text())
-    res.update(adapt.collect(lay.out / "raw", ROOT / "models"))
+    res.update(adapt.collect(lay.out / "raw", ROOT / "models", ROOT / "results" / "trueadapt_from_scratch"))
     res["training"].update(res.pop("trueadapt_training"))
     return res
 

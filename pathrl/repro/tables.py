@@ -187,9 +187,11 @@ def warm_chain(model: str) -> list[str]:
 
 
 def training_method(cfg: dict[str, Any]) -> str:
-    """How the policy of a run config was trained: ``PPO``, ``DAgger from <teacher>`` for a distilled student,
-    ``not trained (<controller>)`` for a model-based controller's directory, ``<controller> around <model>`` for a
-    controller that wraps a shipped policy."""
+    """How the policy of a run config was trained: ``PPO from scratch``, ``PPO from <model>`` for a warm start
+    (``init_from``), ``PPO residual over <controller>, from ...`` for a residual policy (it runs beside the controller),
+    ``DAgger from <teacher>`` for a distilled student, ``not trained (<controller>)`` for a
+    model-based controller's directory, ``<controller> around <model>`` for a controller that wraps a shipped
+    policy."""
     controller = cfg.get("controller")
     if controller:
         name = controller.get("name", "controller")
@@ -198,7 +200,12 @@ def training_method(cfg: dict[str, Any]) -> str:
     algorithm = ((cfg.get("agent") or {}).get("algorithm") or {}).get("class_name", "PPO")
     if algorithm == "Distillation":
         return f"DAgger from {(cfg.get('teacher') or {}).get('name', 'a controller')}"
-    return str(algorithm)
+    start = cfg.get("init_from")
+    origin = f"from {Path(str(start)).name if start else 'scratch'}"
+    residual = (cfg.get("residual") or {}).get("controller")
+    if residual:
+        return f"{algorithm} residual over {residual.get('name', 'a controller')}, {origin}"
+    return f"{algorithm} {origin}"
 
 
 def training_record(model_dir: Path) -> dict[str, Any] | None:

@@ -11,6 +11,7 @@ and writes ``results/raw/<id>/metrics.json``; the 10^5-trajectory limit validati
 from __future__ import annotations
 
 import json
+import re
 from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
@@ -22,8 +23,8 @@ from pathrl.repro.tables import training_record
 
 __all__ = [
     "AdaptEval", "AdaptRow", "COLUMNS", "EPISODES", "REALTIME_ID", "ROWS", "TRAIN_MISSING", "VALIDATION_ID", "collect",
-    "eval_command", "evaluations", "latex", "markdown", "names", "ours", "paper", "realtime_command", "unavailable",
-    "validation_command",
+    "eval_command", "evaluations", "latex", "markdown", "method", "names", "ours", "paper", "realtime_command",
+    "seed_results", "seeds_markdown", "unavailable", "validation_command",
 ]
 
 ADAPT_TABLE = "trueadapt_table_I"
@@ -111,6 +112,14 @@ def _ablation_row(key: str, part: str, variant: str, left_out: str) -> AdaptRow:
     state, ``models/iiwa7_trueadapt_on_plate_distill_<variant>``."""
     return AdaptRow(f"on_plate/{key}", f"on plate: state without {part}", f"{_STUDENT} without {left_out} in its state",
                     AdaptEval("on_plate", f"iiwa7_trueadapt_on_plate_distill_{variant}"))
+
+
+def _scratch_row(key: str, setting: str, variant: str) -> AdaptRow:
+    """The on-plate ablation `key` (`setting`) trained the paper's way:
+    ``models/iiwa7_trueadapt_on_plate_ppo_scratch_<variant>``, the from-scratch recipe of SCRATCH so changed."""
+    return AdaptRow(f"on_plate/{key}_scratch", f"on plate: {setting}", f"**PPO from scratch**, {setting}",
+                    AdaptEval("on_plate", f"{SCRATCH}_{variant}"),
+                    in_paper=False, paper_row=f"on_plate/{key}")
 
 
 _TRAY = "**tray controller: privileged information, not in the paper**"
@@ -241,12 +250,25 @@ def unavailable(e: AdaptEval, models: Path, data: Path) -> str | None:
     return None
 
 
-def collect(raw: Path, models: Path) -> dict[str, Any]:
+_SEED_FILE = re.compile(r"(?P<experiment>.+)_seed(?P<seed>\d+)_pybullet_metrics\.json")
+
+
+def seed_results(folder: Path) -> dict[str, dict[int, dict[str, Any]]]:
+    """{experiment: {seed: metrics}} of the committed PyBullet evaluations of the from-scratch runs in `folder`
+    (``<experiment>_seed<S>_pybullet_metrics.json``, written by ``tools/lab/trueadapt_scratch_queue.sh``)."""
+    out: dict[str, dict[int, dict[str, Any]]] = {}
+    for p in sorted(folder.glob("*_pybullet_metrics.json")) if folder.is_dir() else []:
+        if (m := _SEED_FILE.fullmatch(p.name)) is not None:
+            out.setdefault(m["experiment"], {})[int(m["seed"])] = json.loads(p.read_text())
+    return out
+
+
+def collect(raw: Path, models: Path, seeds: Path | None = None) -> dict[str, Any]:
     """{"trueadapt": {id: metrics.json}, "trueadapt_validation" and "trueadapt_realtime": their JSON or None,
-    "trueadapt_training": {model: summary.json}} of the results in `raw` (a result of a model no longer shipped is
-    left out)."""
+    "trueadapt_training": {model: summary.json}, "trueadapt_seeds": :func:`seed_results` of `seeds`} of the results
+    in `raw` (a result of a model no longer shipped is left out)."""
     out: dict[str, Any] = {"trueadapt": {}, "trueadapt_validation": None, "trueadapt_realtime": None,
-                           "trueadapt_training": {}}
+                           "trueadapt_training": {}, "trueadapt_seeds": seed_results(seeds) if seeds else {}}
     for e in evaluations():
         p = raw / e.id / "metrics.json"
         if p.is_file() and (e.model is None or (models / e.model).is_dir()):
@@ -338,16 +360,55 @@ CAPTION = (
     "accelerations, the plate kinematics, its own filter state), so it is a feasibility bound, not a result "
     "comparable with the paper's. *State ablations* (`models/iiwa7_trueadapt_on_plate_distill_<variant>`): the "
     "on-plate student's recipe with one part of its state left out; the teacher is the same controller, so these rows "
-    "measure what the network needs in order to copy it, not what PPO needs to learn the task. Rows without a "
-    "trained policy of ours show a dash.")
+    "measure what the network needs in order to copy it, not what PPO needs to learn the task. *From-scratch "
+    "ablations* (`models/iiwa7_trueadapt_on_plate_ppo_scratch_<variant>`): the paper's protocol for the same "
+    "question, the from-scratch recipe and budget with one part of the state or one penalty removed, seed 0 (every "
+    "seed below the table). *Trained by*: read from each shipped policy's config: PPO from scratch, PPO from "
+    "<model> (a warm start), DAgger from <teacher>, or not trained. Rows without a trained policy of ours show a "
+    "dash.")
+
+
+def method(results: dict[str, Any], row: AdaptRow) -> str:
+    """How the row's policy was trained (:func:`pathrl.repro.tables.training_method`, from its shipped config), or
+    ``not trained (reference replayed)``; a dash without a shipped model."""
+    if row.evaluation is None:
+        return "–"
+    if row.evaluation.model is None:
+        return "not trained (reference replayed)"
+    training = {**results.get("trueadapt_training", {}), **results.get("training", {})}
+    return training.get(row.evaluation.model, {}).get("method", "–")
+
+
+def _pct(values: list[float]) -> str:
+    """Percentages of fractions, one decimal, joined by ' / '."""
+    return " / ".join(f"{100 * v:.1f}" for v in values)
+
+
+def seeds_markdown(seeds: dict[str, dict[int, dict[str, Any]]]) -> list[str]:
+    """Every seed of every from-scratch experiment evaluated in PyBullet: success, fraction, |a|, |jerk|, violations
+    per seed (seed order) and the mean success."""
+    if not seeds:
+        return []
+    lines = ["", "PPO from scratch, every seed (the table above shows seed 0; PyBullet, the 1000 test trajectories; "
+             "`results/trueadapt_from_scratch/<experiment>_seed<S>_pybullet_metrics.json`, learning curves "
+             "`<experiment>_seed<S>.csv` beside them; `tools/lab/trueadapt_scratch_queue.sh`):", "",
+             "| experiment | seeds | success (%) | mean success (%) | fraction (%) | \\|acc\\| (%) | \\|jerk\\| (%) | "
+             "limit violations |", "|---|---|---|---|---|---|---|---|"]
+    for exp, runs in seeds.items():
+        ms = [runs[k] for k in sorted(runs)]
+        mean = 100 * sum(m["success"] for m in ms) / len(ms)
+        lines.append(f"| `{exp}` | {', '.join(map(str, sorted(runs)))} | {_pct([m['success'] for m in ms])} | "
+                     f"{mean:.1f} | {_pct([m['fraction'] for m in ms])} | {_pct([m['acc'] for m in ms])} | "
+                     f"{_pct([m['jerk'] for m in ms])} | {sum(int(m['limit_violations']) for m in ms)} |")
+    return lines
 
 
 def markdown(results: dict[str, Any]) -> tuple[list[str], list[list[str]]]:
     """The table's Markdown lines and CSV rows (table, row, metric, ours, paper)."""
     lines = ["## TrueAdapt Table I: online adaptation of reference trajectories (iiwa7, ball on plate, PyBullet)",
              "", CAPTION, "",
-             "| setting | ours | " + " | ".join(HEADERS) + " | ball | episodes | limit violations |",
-             "|---|---|" + "---|" * (len(HEADERS) + 3)]
+             "| setting | ours | trained by | " + " | ".join(HEADERS) + " | ball | episodes | limit violations |",
+             "|---|---|---|" + "---|" * (len(HEADERS) + 3)]
     csv_rows: list[list[str]] = []
     for row in ROWS:
         m, pv = _row_values(results, row)
@@ -358,7 +419,7 @@ def markdown(results: dict[str, Any]) -> tuple[list[str], list[list[str]]]:
         cells = [_cell(ours(m, c), pv[c], task, c) for c in COLUMNS]
         tail = ["–", "–", "–"] if m is None else [str(m.get("backend", "–")), str(m["episodes"]),
                                                    str(m.get("limit_violations", "–"))]
-        lines.append(f"| {row.setting} | {what} | " + " | ".join(cells + tail) + " |")
+        lines.append(f"| {row.setting} | {what} | {method(results, row)} | " + " | ".join(cells + tail) + " |")
         for c in COLUMNS:
             x = ours(m, c)
             csv_rows.append([ADAPT_TABLE, row.key, c, "" if x is None else f"{x:.6g}",
@@ -367,6 +428,7 @@ def markdown(results: dict[str, Any]) -> tuple[list[str], list[list[str]]]:
             csv_rows.append([ADAPT_TABLE, row.key, "limit_violations", str(m.get("limit_violations", "")), ""])
     v = results.get("trueadapt_validation")
     rt = results.get(REALTIME_ID)
+    lines += seeds_markdown(results.get("trueadapt_seeds") or {})
     lines += ["", _validation_line(v), "", _realtime_line(rt)]
     if rt:
         csv_rows.append([ADAPT_TABLE, "realtime", "valid_range_ms_max", f"{rt['valid_range_ms_max']:.6g}", "0.9"])
