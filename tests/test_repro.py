@@ -181,7 +181,8 @@ def test_quick_profile_trains_evaluates_and_renders(tmp_path):
 
 
 def test_training_record_names_the_method_from_the_shipped_config(tmp_path):
-    """PPO from scratch or from a warm start for a PPO run, "DAgger from <teacher>" for a distilled student; no summary: None."""
+    """PPO from scratch or from a warm start for a PPO run, "DAgger from <teacher>" for a distilled student; no
+    summary: None."""
     ppo, student = tmp_path / "ppo", tmp_path / "student"
     for d, cfg in ((ppo, {"agent": {"algorithm": {"class_name": "PPO"}}}),
                    (student, {"agent": {"algorithm": {"class_name": "Distillation"}},
