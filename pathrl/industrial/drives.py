@@ -54,18 +54,18 @@ class DriveParams:
     """Drive and servo parameters (module doc for their sources)."""
 
     sim_hz: float = 1000.0  # Hz, integration rate of the drive model
-    kp: float = 30.0  # 1/s, position loop gain
+    kp: list[float] = field(default_factory=lambda: [30.0, 30.0, 30.0, 45.0, 45.0, 45.0])  # 1/s, position loops
     vel_hz: float = 20.0  # Hz, velocity loop bandwidth
     ti_s: float = 0.05  # s, velocity loop integral time
-    ff_vel: float = 1.0  # share of velocity feed-forward
-    ff_torque: float = 1.0  # share of torque feed-forward
+    ff_vel: float = 0.9  # share of velocity feed-forward
+    ff_torque: float = 0.5  # share of torque feed-forward
     gear_hz: list[float] = field(default_factory=lambda: [9.0, 9.0, 12.0, 18.0, 18.0, 25.0])
     gear_zeta: float = 0.05
     rotor_inertia: list[float] = field(default_factory=lambda: [240.0, 240.0, 160.0, 10.0, 10.0, 5.0])
     coulomb: list[float] = field(default_factory=lambda: [200.0, 250.0, 150.0, 30.0, 30.0, 15.0])
     viscous: list[float] = field(default_factory=lambda: [400.0, 500.0, 300.0, 40.0, 40.0, 20.0])
     torque_max: list[float] = field(default_factory=lambda: [7000.0, 12000.0, 7000.0, 1500.0, 1500.0, 800.0])
-    model_error: float = 0.1
+    model_error: float = 0.03
     model_seed: int = 6640
     friction_error: float = 0.2
     start_jitter_s: float = 0.004
@@ -74,14 +74,16 @@ class DriveParams:
     noise_mm: float = 0.0
 
     def __post_init__(self) -> None:
-        for key in ("sim_hz", "kp", "vel_hz", "ti_s"):
+        for key in ("sim_hz", "vel_hz", "ti_s"):
             if not getattr(self, key) > 0.0:
                 raise ValueError(f"drives.{key} must be > 0, got {getattr(self, key)}")
-        for key in ("gear_hz", "rotor_inertia", "coulomb", "viscous", "torque_max"):
+        for key in ("kp", "gear_hz", "rotor_inertia", "coulomb", "viscous", "torque_max"):
             vals = getattr(self, key)
             if len(vals) != 6 or min(vals) < 0.0 or (key in ("gear_hz", "rotor_inertia", "torque_max")
                                                      and min(vals) <= 0.0):
                 raise ValueError(f"drives.{key} needs 6 values (> 0), got {vals}")
+        if min(self.kp) <= 0.0:
+            raise ValueError(f"drives.kp must be > 0 on every axis, got {self.kp}")
         if min(self.model_error, self.friction_error, self.start_jitter_s, self.friction_var, self.drift_mm,
                self.noise_mm, self.gear_zeta, self.ff_vel, self.ff_torque) < 0.0:
             raise ValueError("drives: errors, variations, damping and feed-forward shares must be >= 0")
@@ -142,7 +144,7 @@ def simulate(q_r: np.ndarray, rate: float, true: Dynamics, model: Dynamics, k_ge
     qd = np.zeros(6)
     integ = (h_true[0] - tau_ff[0]) / ki  # the integrator holds what the feed-forward misses of gravity
     out = np.empty((n, 6))
-    kp, ffv = params.kp, params.ff_vel
+    kp, ffv = np.asarray(params.kp), params.ff_vel
     for k in range(n):
         ev = kp * (th_r_s[k] - th) + ffv * thd_r_s[k] - thd
         integ += ev * dt

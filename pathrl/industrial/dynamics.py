@@ -78,6 +78,11 @@ def perturbed(model: ArmModel, error: float, seed: int) -> ArmModel:
     return ArmModel(masses, com, model.box)  # type: ignore[arg-type]
 
 
+def _grid(x: float, per_unit: float) -> float:
+    """x rounded to a multiple of 1 / per_unit (a power of two: exact in binary)."""
+    return round(x * per_unit) / per_unit
+
+
 def _urdf(model: ArmModel) -> str:
     """URDF text of the arm: joint origins are arm.LINKS (mm -> m), axes arm.AXES, boxes as inertias."""
     steps = [np.zeros(3), arm.LINKS[0], arm.LINKS[1], arm.LINKS[2], arm.LINKS[3], np.zeros(3)]
@@ -86,14 +91,17 @@ def _urdf(model: ArmModel) -> str:
              'izz="0"/></inertial></link>']
     parent = "base"
     for j in range(6):
-        m = model.masses[j]
+        # values on a binary grid (0.125 kg, 2^-10 m): pybullet's inverse dynamics rejects an inertia that its
+        # own parallel-axis products make asymmetric by round-off
+        m = _grid(model.masses[j], 8.0)
         bx, by, bz = (v / 1000.0 for v in model.box[j])
         ixx, iyy, izz = m * (by**2 + bz**2) / 12, m * (bx**2 + bz**2) / 12, m * (bx**2 + by**2) / 12
-        cx, cy, cz = (v / 1000.0 for v in model.com[j])
+        cx, cy, cz = (_grid(v / 1000.0, 1024.0) for v in model.com[j])
         ox, oy, oz = (v / 1000.0 for v in steps[j])
         ax = " ".join(f"{v:g}" for v in arm.AXES[j])
         parts.append(f'<link name="l{j + 1}"><inertial><origin xyz="{cx} {cy} {cz}"/><mass value="{m}"/>'
-                     f'<inertia ixx="{ixx}" ixy="0" ixz="0" iyy="{iyy}" iyz="0" izz="{izz}"/></inertial></link>')
+                     f'<inertia ixx="{_grid(ixx, 1024.0)}" ixy="0" ixz="0" iyy="{_grid(iyy, 1024.0)}" iyz="0" '
+                     f'izz="{_grid(izz, 1024.0)}"/></inertial></link>')
         parts.append(f'<joint name="j{j + 1}" type="revolute"><parent link="{parent}"/><child link="l{j + 1}"/>'
                      f'<origin xyz="{ox} {oy} {oz}"/><axis xyz="{ax}"/>'
                      '<limit lower="-10" upper="10" effort="1e6" velocity="100"/></joint>')

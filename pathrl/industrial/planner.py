@@ -52,7 +52,7 @@ class PlannerParams:
     corner_s: float = 0.06  # s, longest time spent in a corner (speed-dependent zone use)
     ori_zone_factor: float = 1.5  # orientation zone / position zone (ABB's z10 has 15 mm for the orientation)
     tcp_acc: float = 4000.0  # mm/s^2, path acceleration (tangential and centripetal)
-    beta: float = 0.5  # share of the axis acceleration budget for the tangential part
+    beta: float = 0.2  # share of the axis acceleration budget for the tangential part
     fir_s: float = 0.032  # s, moving average of s(t)
     vel_limits: list[float] = field(default_factory=lambda: [100.0, 90.0, 90.0, 190.0, 140.0, 190.0])  # deg/s
     acc_limits: list[float] = field(default_factory=lambda: [7.6, 5.0, 10.3, 42.5, 36.8, 50.5])  # rad/s^2
