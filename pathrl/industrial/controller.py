@@ -188,7 +188,7 @@ def _drift(t: np.ndarray, amplitude: float, rng: np.random.Generator) -> np.ndar
 
 def _execute_abb(program: Program, v: float, params: ControllerParams, seed: int) -> Execution:
     """The calibrated model (module doc): plan, drives, forward kinematics, variation."""
-    from pathrl.industrial import dynamics, drives, planner
+    from pathrl.industrial import drives, dynamics, planner
 
     tool = arm.DEFAULT_TOOL if program.tool is None else program.tool
     pl = planner.plan(program, v, params.planner, tool, params.rate, params.settle_s)

@@ -138,8 +138,9 @@ class Dynamics:
         """Bias torques (N, 6) N m at configurations q (N, 6) rad and velocities qd (N, 6) rad/s."""
         q, qd = np.atleast_2d(q), np.atleast_2d(qd)
         zero = [0.0] * 6
-        return np.array([self._pb.calculateInverseDynamics(self.body, list(map(float, a)), list(map(float, b)), zero,
-                                                           physicsClientId=self.cid) for a, b in zip(q, qd, strict=True)])
+        inv = self._pb.calculateInverseDynamics
+        return np.array([inv(self.body, list(map(float, a)), list(map(float, b)), zero, physicsClientId=self.cid)
+                         for a, b in zip(q, qd, strict=True)])
 
 
 @lru_cache(maxsize=8)

@@ -22,7 +22,10 @@ interpolation rate, the way an industrial path planner does it, instruction by i
    instructions, so the speed must allow stopping at the last one it holds:
    sdot^2 <= 2 a_tcp (s_horizon - s). A forward and a backward running minimum give the profile.
 4. **Time law.** s(t) at ``rate`` Hz, smoothed by a moving average of ``fir_s`` seconds (a jerk limit), and the
-   joint setpoints q(s(t)) with their first and second time derivatives (finite differences).
+   joint setpoints q(s(t)), moving-averaged over ``joint_fir_s`` seconds (the interpolator's joint-space
+   smoothing: it leaves lines alone and cuts a curve of curvature kappa by about v^2 kappa T^2 / 24, a
+   speed-dependent cut that reaches the tool orientation too), with their first and second time derivatives
+   (finite differences).
 """
 
 from __future__ import annotations
@@ -54,6 +57,7 @@ class PlannerParams:
     tcp_acc: float = 4000.0  # mm/s^2, path acceleration (tangential and centripetal)
     beta: float = 0.2  # share of the axis acceleration budget for the tangential part
     fir_s: float = 0.032  # s, moving average of s(t)
+    joint_fir_s: float = 0.0  # s, moving average of the joint setpoints (cuts curves by ~ v^2 kappa T^2 / 24)
     vel_limits: list[float] = field(default_factory=lambda: [100.0, 90.0, 90.0, 190.0, 140.0, 190.0])  # deg/s
     acc_limits: list[float] = field(default_factory=lambda: [7.6, 5.0, 10.3, 42.5, 36.8, 50.5])  # rad/s^2
 
@@ -61,8 +65,8 @@ class PlannerParams:
         for key in ("step_mm", "tcp_acc", "corner_s", "ori_zone_factor"):
             if not getattr(self, key) > 0.0:
                 raise ValueError(f"planner.{key} must be > 0, got {getattr(self, key)}")
-        if self.lookahead < 1 or self.prep_s < 0 or self.fir_s < 0 or not 0 < self.beta < 1:
-            raise ValueError("planner: need lookahead >= 1, prep_s >= 0, fir_s >= 0, 0 < beta < 1")
+        if self.lookahead < 1 or min(self.prep_s, self.fir_s, self.joint_fir_s) < 0 or not 0 < self.beta < 1:
+            raise ValueError("planner: need lookahead >= 1, prep_s, fir_s, joint_fir_s >= 0, 0 < beta < 1")
         if len(self.vel_limits) != 6 or len(self.acc_limits) != 6:
             raise ValueError("planner: vel_limits and acc_limits need 6 values (axes 1-6)")
 
@@ -197,6 +201,16 @@ def speed_profile(s: np.ndarray, q: np.ndarray, p: np.ndarray, v: float, s_stop:
     return np.sqrt(np.maximum(w, 0.0))
 
 
+def moving_average(x: np.ndarray, n: int) -> np.ndarray:
+    """Centred moving average of n samples along axis 0 of x (N, ...), the ends held (same length)."""
+    if n <= 1:
+        return x
+    pad = (n - 1) // 2, n - 1 - (n - 1) // 2
+    xp = np.concatenate([np.repeat(x[:1], pad[0], 0), x, np.repeat(x[-1:], pad[1], 0)])
+    c = np.cumsum(np.concatenate([np.zeros_like(x[:1]), xp]), axis=0)
+    return (c[n:] - c[:-n]) / n
+
+
 def _time_law(s: np.ndarray, sdot: np.ndarray, params: PlannerParams, rate: float) -> np.ndarray:
     """s(t) (n,) at `rate` Hz, moving-averaged over fir_s."""
     dt = 2.0 * np.diff(s) / np.maximum(sdot[:-1] + sdot[1:], 1e-9)
@@ -234,6 +248,7 @@ def plan(program: Program, v: float, params: PlannerParams | None = None, tool: 
     st = _time_law(s, sdot, params, rate)
     st = np.r_[st, np.full(int(round(settle_s * rate)), st[-1])]
     qt = np.stack([np.interp(st, s, q[:, j]) for j in range(6)], axis=1)
+    qt = moving_average(qt, int(round(params.joint_fir_s * rate)))
     dt = 1.0 / rate
     qd = np.gradient(qt, dt, axis=0)
     qdd = np.gradient(qd, dt, axis=0)
