@@ -25,10 +25,11 @@ Parameter sources (all per axis 1-6; *estimated* = no public figure, chosen for 
   ~200 on axes 1-3, ~100 on the wrist; rotors 0.5-6e-3 kg m^2);
 * ``coulomb`` / ``viscous``: joint friction (N m, N m s/rad), *estimated* at 2-4 % of ``torque_max``;
 * ``torque_max``: link-side torque limits, *estimated* from the 180 kg payload's static and dynamic load;
-* ``kp`` / ``vel_hz`` / ``ti_s``: servo tuning (1/s, Hz, s), *calibrated* on the curve-1 recording
-  (``docs/industrial.md``), velocity loop gain k_v = (B_j + M_jj) 2 pi ``vel_hz``;
+* ``kp`` / ``vel_hz`` / ``ti_s``: servo tuning (1/s, Hz, s), *chosen* (typical industrial values), velocity
+  loop gain k_v = (B_j + M_jj) 2 pi ``vel_hz``; ``ff_vel`` / ``ff_torque`` the feed-forward shares;
 * ``model_error``: the feed-forward model's masses / centres of mass are off by up to this share (seeded by
-  ``model_seed``, one fixed wrong model per controller), ``friction_error`` its friction underestimate.
+  ``model_seed``, one fixed wrong model per controller; *calibrated* on the curve-1 recording,
+  ``docs/industrial.md``), ``friction_error`` its friction underestimate.
 
 Execution variation (seeded by the execution's seed): a start delay uniform in [0, ``start_jitter_s``]; a
 run-to-run friction scale 1 + ``friction_var`` N(0, 1); a slow drift of the TCP (thermal growth, random
@@ -55,18 +56,18 @@ class DriveParams:
     """Drive and servo parameters (module doc for their sources)."""
 
     sim_hz: float = 1000.0  # Hz, integration rate of the drive model
-    kp: list[float] = field(default_factory=lambda: [30.0, 30.0, 30.0, 33.0, 33.0, 33.0])  # 1/s, position loops
-    vel_hz: float = 4.5  # Hz, velocity loop bandwidth
+    kp: list[float] = field(default_factory=lambda: [30.0, 30.0, 30.0, 30.0, 30.0, 30.0])  # 1/s, position loops
+    vel_hz: float = 20.0  # Hz, velocity loop bandwidth
     ti_s: float = 0.05  # s, velocity loop integral time
-    ff_vel: float = 0.9  # share of velocity feed-forward
-    ff_torque: float = 0.0  # share of the inertial torque fed forward (gravity, Coriolis, friction: always)
+    ff_vel: float = 1.0  # share of velocity feed-forward
+    ff_torque: float = 1.0  # share of the inertial torque fed forward (gravity, Coriolis, friction: always)
     gear_hz: list[float] = field(default_factory=lambda: [9.0, 9.0, 12.0, 18.0, 18.0, 25.0])
     gear_zeta: float = 0.05
     rotor_inertia: list[float] = field(default_factory=lambda: [240.0, 240.0, 160.0, 10.0, 10.0, 5.0])
     coulomb: list[float] = field(default_factory=lambda: [200.0, 250.0, 150.0, 30.0, 30.0, 15.0])
     viscous: list[float] = field(default_factory=lambda: [400.0, 500.0, 300.0, 40.0, 40.0, 20.0])
     torque_max: list[float] = field(default_factory=lambda: [7000.0, 12000.0, 7000.0, 1500.0, 1500.0, 800.0])
-    model_error: float = 0.04
+    model_error: float = 0.01
     model_seed: int = 6640
     friction_error: float = 0.2
     start_jitter_s: float = 0.004

@@ -57,7 +57,7 @@ class PlannerParams:
     tcp_acc: float = 4000.0  # mm/s^2, path acceleration (tangential and centripetal)
     beta: float = 0.2  # share of the axis acceleration budget for the tangential part
     fir_s: float = 0.032  # s, moving average of s(t)
-    joint_fir_s: float = 0.0  # s, moving average of the joint setpoints (cuts curves by ~ v^2 kappa T^2 / 24)
+    joint_fir_s: float = 0.18  # s, moving average of the joint setpoints (cuts curves by ~ v^2 kappa T^2 / 24)
     vel_limits: list[float] = field(default_factory=lambda: [100.0, 90.0, 90.0, 190.0, 140.0, 190.0])  # deg/s
     acc_limits: list[float] = field(default_factory=lambda: [7.6, 5.0, 10.3, 42.5, 36.8, 50.5])  # rad/s^2
 
