@@ -79,7 +79,8 @@ def _policy(run_dir: str):
     except (ValueError, KeyError, TypeError) as exc:
         raise UserError(f"policy: {exc}") from None
     print(f"policy: {run_dir} at iteration {it}")
-    return agent.act, "RL"
+    clip = agent.params.action_clip
+    return (agent.act if clip == 1.0 else (lambda obs: clip * agent.act(obs))), "RL"
 
 
 def _train(cfg, controller, rl) -> None:

@@ -3,7 +3,10 @@ controller executing MoveL / MoveJ programs with blend zones, target trajectorie
 adjustment by MPGD or a learned TD3 policy, and the bisection on the speed command. See ``docs/industrial.md``.
 
 Modules: :mod:`~pathrl.industrial.arm` (kinematics), :mod:`~pathrl.industrial.program` (programs, blended paths),
-:mod:`~pathrl.industrial.controller` (the black box), :mod:`~pathrl.industrial.trajectories`,
+:mod:`~pathrl.industrial.controller` (the black box; ``model="abb"``: the model calibrated to a recorded ABB
+controller, :mod:`~pathrl.industrial.planner`, :mod:`~pathrl.industrial.dynamics`, :mod:`~pathrl.industrial.drives`,
+:mod:`~pathrl.industrial.reference`), :mod:`~pathrl.industrial.ilc` (iterative learning control),
+:mod:`~pathrl.industrial.trajectories`,
 :mod:`~pathrl.industrial.metrics`, :mod:`~pathrl.industrial.mpgd`, :mod:`~pathrl.industrial.speed_search`,
 :mod:`~pathrl.industrial.features` / :mod:`~pathrl.industrial.iwa_env` / :mod:`~pathrl.industrial.per` /
 :mod:`~pathrl.industrial.rl` / :mod:`~pathrl.industrial.rl_train` (learned IWA), :mod:`~pathrl.industrial.tables`,

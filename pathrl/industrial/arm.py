@@ -20,11 +20,13 @@ elbow up/down and wrist flip give up to 8 solutions; the one nearest a reference
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 __all__ = [
-    "ACC_LIMITS", "AXES", "JERK_LIMITS", "LINKS", "POS_LIMITS", "R_FLANGE", "TOOL_OFFSET", "VEL_LIMITS", "fk", "ik",
-    "ik_all", "ik_path", "jacobian", "within_limits",
+    "ACC_LIMITS", "AXES", "DEFAULT_TOOL", "JERK_LIMITS", "LINKS", "POS_LIMITS", "R_FLANGE", "TOOL_OFFSET", "VEL_LIMITS",
+    "Tool", "fk", "ik", "ik_all", "ik_path", "jacobian", "within_limits",
 ]
 
 #: Joint axes in the zero pose (base frame).
@@ -37,6 +39,19 @@ R_FLANGE = np.array([[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]])
 TOOL_OFFSET = np.array([0.0, 0.0, 300.0])
 
 DEG = np.pi / 180.0
+
+
+@dataclass(frozen=True, eq=False)
+class Tool:
+    """A tool on the flange: TCP `offset` (3,) mm in the tool0 frame and the TCP frame's rotation `rot` (3, 3)
+    in tool0 (a program's rotations are TCP rotations; tool0 = TCP rot @ rot^T)."""
+
+    offset: np.ndarray
+    rot: np.ndarray
+
+
+#: The project's straight 300 mm tool (TCP frame = tool0 frame).
+DEFAULT_TOOL = Tool(TOOL_OFFSET, np.eye(3))
 #: Datasheet axis ranges (rad), shape (6, 2).
 POS_LIMITS = DEG * np.array([[-170, 170], [-65, 85], [-180, 70], [-300, 300], [-120, 120], [-360, 360]], dtype=float)
 #: Datasheet maximum axis speeds (rad/s).

@@ -143,9 +143,11 @@ def action_steps(actions: np.ndarray, positions: np.ndarray, e: np.ndarray) -> n
 
 
 def rewards(pos: np.ndarray, ori: np.ndarray, prev_pos: np.ndarray, prev_ori: np.ndarray, pos0: np.ndarray,
-            ori0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Per-waypoint rewards (m,) and local termination flags (m,) (eqs. 15-18)."""
+            ori0: np.ndarray, w_ori: float = 1.0, w_success: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """Per-waypoint rewards (m,) and local termination flags (m,) (eqs. 15-18): position improvement, `w_ori` x
+    orientation improvement, -100 on failure, `w_success` x 10 on success (the paper: w_ori = 0.5 and
+    w_success = 0.8^k at iteration k)."""
     r_p = np.clip((prev_pos - pos) / np.maximum(pos0, 1e-6), -10, 10)
     r_b = np.clip((prev_ori - ori) / np.maximum(ori0, 1e-6), -10, 10)
     fail, success = pos > FAIL_MM, pos < SUCCESS_MM
-    return r_p + r_b - 100.0 * fail + 10.0 * success, fail | success
+    return r_p + w_ori * r_b - 100.0 * fail + 10.0 * w_success * success, fail | success

@@ -48,8 +48,10 @@ class IWAEpisode:
     """IWA on one target at speed command `v` (module doc)."""
 
     def __init__(self, target: Target, v: float, controller: ControllerParams | None = None, m: int = 100,
-                 zone: float = 10.0, k_max: int = 10) -> None:
+                 zone: float = 10.0, k_max: int = 10, action_clip: float = 2.0, w_ori: float = 1.0,
+                 success_decay: float = 1.0) -> None:
         self.target, self.v, self.k_max = target, float(v), int(k_max)
+        self.action_clip, self.w_ori, self.success_decay = float(action_clip), float(w_ori), float(success_decay)
         self.controller = ControllerParams() if controller is None else controller
         self.m, self.zone = m, zone
         self.psi = waypoint_indices(len(target.p), m)
@@ -73,8 +75,8 @@ class IWAEpisode:
         return obs
 
     def step(self, actions: np.ndarray) -> StepResult:
-        """Apply actions (m, 3) in [-1, 1], execute, observe (module doc)."""
-        actions = np.clip(np.asarray(actions, dtype=np.float64), -1.0, 1.0)
+        """Apply actions (m, 3) (clipped to +-action_clip; the paper's +-2), execute, observe (module doc)."""
+        actions = np.clip(np.asarray(actions, dtype=np.float64), -self.action_clip, self.action_clip)
         program = self.program.with_positions(self.program.positions + action_steps(actions, self.program.positions,
                                                                                    self._err))
         self.k += 1
@@ -83,7 +85,8 @@ class IWAEpisode:
         except ValueError:  # out of reach or axis range: a failure, the profile stays as it was
             fail = np.full(self.m, True)
             return StepResult(np.zeros((self.m, 313)), np.full(self.m, -100.0), fail, True, None)
-        reward, done = rewards(pos, ori, self.pos, self.ori, self.pos0, self.ori0)
+        reward, done = rewards(pos, ori, self.pos, self.ori, self.pos0, self.ori0, self.w_ori,
+                               self.success_decay ** self.k)
         self.program, self.errors, self.pos, self.ori = program, errs, pos, ori
         if errs.max_pos_mm < self.best[0]:
             self.best = (errs.max_pos_mm, program, errs)

@@ -14,7 +14,8 @@ executed path and, for each peak, adjusts the waypoints next to it:
   dP = -gain |e| g / |g|^2 (peaks sharing a waypoint add their steps).
 
 Only positions move; orientations stay as initialised (as in the paper's RL actions). The loop stops when the
-maximum error meets the spec (0.5 mm) or after ``k_max`` iterations (paper: 50) and returns the best program.
+maximum error meets the spec (0.5 mm) or after ``k_max`` iterations (paper: 50), or when an adjusted program
+cannot be executed (out of reach), and returns the best program.
 """
 
 from __future__ import annotations
@@ -130,7 +131,12 @@ def run_mpgd(target: Target, program: Program, v: float, params: MPGDParams | No
     best: IWAResult | None = None
     history: list[float] = []
     for k in range(params.k_max + 1):
-        ex = execute(program, v, controller, seed=seed + k)
+        try:
+            ex = execute(program, v, controller, seed=seed + k)
+        except ValueError:  # the adjusted program left the arm's reach or axis ranges: keep the best so far
+            if best is None:
+                raise
+            break
         if on_execution is not None:
             on_execution(k, program, ex)
         errs = evaluate(ex.p, ex.rot, 1.0 / controller.rate, target.p, target.z_axis)

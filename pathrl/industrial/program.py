@@ -29,13 +29,15 @@ __all__ = ["DEFAULT_SEED", "PathSamples", "Program", "blend_polyline", "sample_p
 @dataclass(frozen=True)
 class Program:
     """m waypoints: positions (m, 3) mm, rotations (m, 3, 3); `move` "L" or "J"; `zone` mm; for MoveJ (and as
-    the IK seed of MoveL) `q_seed` (6,) rad picks the arm configuration."""
+    the IK seed of MoveL) `q_seed` (6,) rad picks the arm configuration; `tool` is the TCP on the flange (None:
+    :data:`pathrl.industrial.arm.DEFAULT_TOOL`; the calibrated controller model honours it)."""
 
     positions: np.ndarray
     rotations: np.ndarray
     move: str = "L"
     zone: float = 10.0
     q_seed: np.ndarray | None = None
+    tool: arm.Tool | None = None
 
     def __post_init__(self) -> None:
         m = len(self.positions)
@@ -48,7 +50,8 @@ class Program:
 
     def with_positions(self, positions: np.ndarray) -> Program:
         """The same program with moved waypoints (rotations kept, as in the paper's waypoint adjustment)."""
-        return Program(np.asarray(positions, dtype=np.float64), self.rotations, self.move, self.zone, self.q_seed)
+        return Program(np.asarray(positions, dtype=np.float64), self.rotations, self.move, self.zone, self.q_seed,
+                       self.tool)
 
 
 @dataclass(frozen=True)

@@ -51,6 +51,9 @@ class RLParams:
     per_alpha: float = 0.6
     per_beta: float = 0.4
     n_train: int = 300
+    action_clip: float = 1.0  # the network's tanh output times this is the action (the paper: 2)
+    w_ori: float = 1.0  # reward weight of the orientation improvement (the paper: 0.5)
+    success_decay: float = 1.0  # success reward x success_decay^k at iteration k (the paper: 0.8)
     ablate: list[str] = field(default_factory=list)
     checkpoint_every: int = 500
     log_every: int = 20
@@ -60,6 +63,8 @@ class RLParams:
         bad = [a for a in self.ablate if a not in ABLATIONS]
         if bad:
             raise ValueError(f"rl.ablate: unknown {bad[0]!r}; known: {', '.join(ABLATIONS)}")
+        if not (0.0 < self.action_clip <= 2.0 and self.w_ori >= 0.0 and 0.0 < self.success_decay <= 1.0):
+            raise ValueError("rl: need 0 < action_clip <= 2, w_ori >= 0, 0 < success_decay <= 1")
         if self.iterations < 1 or self.k_max < 1 or self.batch < 1 or self.n_train < 1 or not self.hidden:
             raise ValueError("rl: iterations, k_max, batch, n_train must be >= 1 and hidden non-empty")
 

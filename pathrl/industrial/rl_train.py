@@ -112,10 +112,11 @@ def train(run_dir: Path, params: RLParams, controller: ControllerParams, m: int 
         for it in range(start, params.iterations):
             if env is None:
                 target = training_target(int(rng.integers(params.n_train)), params.seed)
-                env = IWAEpisode(target, target.speed, controller, m, zone, params.k_max)
+                env = IWAEpisode(target, target.speed, controller, m, zone, params.k_max, 2.0, params.w_ori,
+                                 params.success_decay)
                 obs, episodes = env.reset(), episodes + 1
             action = _explore(agent, obs, it, params, rng)
-            res = env.step(action)
+            res = env.step(params.action_clip * action)
             buffer.add(torch.as_tensor(obs), torch.as_tensor(action), torch.as_tensor(res.reward),
                        torch.as_tensor(res.obs), torch.as_tensor(res.done))
             log["reward"].append(float(res.reward.mean()))

@@ -1,0 +1,113 @@
+"""The controller model calibrated to the recorded ABB controller (issue 47): planner look-ahead and zone
+degradation, drive dynamics (gravity hold, gear elasticity), the curve-1 calibration and a tiny ILC run."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from pathrl.industrial import drives, dynamics
+from pathrl.industrial.controller import ControllerParams, execute
+from pathrl.industrial.ilc import ILCParams, run_ilc
+from pathrl.industrial.planner import PlannerParams, plan, plan_zones
+from pathrl.industrial.program import Program
+from pathrl.industrial.trajectories import Target
+
+DOWN = np.diag([1.0, -1.0, -1.0])  # tool z pointing down
+
+
+def _program(points, zone=10.0) -> Program:
+    pts = np.asarray(points, dtype=float)
+    return Program(pts, np.repeat(DOWN[None], len(pts), 0), "L", zone)
+
+
+def test_short_segment_at_high_speed_degrades_the_zone_to_a_fine_point():
+    # waypoints 1 and 2 are 2 mm apart, closer than the z10 zone: at 1000 mm/s the segment lasts 2 ms, less than
+    # the 8 ms preparation time, so the zone at waypoint 2 becomes a fine point (a corner event)
+    pts = [[1500, -200, 800], [1500, 0, 800], [1500, 2, 800], [1500, 2, 1000]]
+    radii, fine, events = plan_zones(np.array(pts, float), 10.0, 1000.0, PlannerParams())
+    assert [e.waypoint for e in events] == [2] and math.isclose(events[0].segment_s, 0.002)
+    assert fine.tolist() == [True, False, True, True] and radii[2] == 0.0
+    assert radii[1] == pytest.approx(1.0)  # shrunk to half the 2 mm segment
+    # at 50 mm/s the segment lasts 40 ms: the zone is kept, shrunk to half the short segment
+    radii, fine, events = plan_zones(np.array(pts, float), 10.0, 50.0, PlannerParams())
+    assert events == [] and radii[2] == pytest.approx(1.0) and not fine[1:3].any()
+    # the planned speed comes (almost: the 32 ms moving average of s(t) rounds the stop) to rest there
+    pl = plan(_program(pts), 1000.0)
+    at = np.argmin(np.abs(pl.s - 202.0))
+    assert pl.sdot[at - 2: at + 3].min() < 0.05 * 1000.0
+    ex = execute(_program(pts), 1000.0, ControllerParams(model="abb"))
+    assert [e.waypoint for e in ex.events] == [2]
+
+
+def test_finite_lookahead_caps_the_speed_on_short_segments():
+    # 81 collinear waypoints 10 mm apart: holding 5 instructions (50 mm) the planner must be able to stop within
+    # them, so v^2 <= 2 a_tcp 50 mm: 632 mm/s at 4000 mm/s^2, whatever the command (1000 mm/s); the moving
+    # average of s(t) overshoots such a plateau by ~2 %
+    pts = [[1500.0, -300.0 + 10.0 * i, 800.0] for i in range(81)]
+    cap = math.sqrt(2 * 4000.0 * 50.0)
+    short = plan(_program(pts), 1000.0, PlannerParams(lookahead=5))
+    assert cap * 0.97 < short.sdot.max() <= cap * 1.03
+    long = plan(_program(pts), 1000.0, PlannerParams(lookahead=80))
+    assert long.sdot.max() == pytest.approx(1000.0, rel=0.01)
+
+
+def _nominal_gears(params: drives.DriveParams):
+    true = dynamics.cached(dynamics.nominal())
+    m = true.mass_matrix(drives.NOMINAL_Q[None])[0]
+    return true, m, *drives.gear_matrices(m, params)
+
+
+def test_gravity_holds_the_arm_at_rest_under_the_servo():
+    params = drives.DriveParams(start_jitter_s=0.0, friction_var=0.0)
+    true, _, k, d = _nominal_gears(params)
+    model = dynamics.cached(dynamics.perturbed(dynamics.nominal(), params.model_error, params.model_seed))
+    q_r = np.repeat(drives.NOMINAL_Q[None], 500, 0)  # 2 s at rest at 250 Hz
+    q = drives.simulate(q_r, 250.0, true, model, k, d, params, np.random.default_rng(0))
+    assert np.abs(q - q[0]).max() < 1e-6  # it does not sag or drift
+    # what is left is the feed-forward model's gravity error over the gear: (g - g^) / K, by hand
+    g_err = (true.bias(q_r[:1], np.zeros((1, 6))) - model.bias(q_r[:1], np.zeros((1, 6))))[0] / k
+    np.testing.assert_allclose(q[-1] - q_r[-1], -g_err, atol=2e-6)
+
+
+def test_gear_step_overshoots_by_the_configured_elasticity():
+    params = drives.DriveParams(gear_zeta=0.1)
+    _, m, k, d = _nominal_gears(params)
+    for axis in (0, 5):
+        q = drives.gear_step(m[axis, axis], k[axis], d[axis], 1e-3, 0.3)
+        zeta, w = params.gear_zeta, 2 * np.pi * params.gear_hz[axis]
+        overshoot = math.exp(-math.pi * zeta / math.sqrt(1 - zeta**2))
+        assert (q.max() - 1e-3) / 1e-3 == pytest.approx(overshoot, rel=0.02)
+        assert np.argmax(q) * 1e-4 == pytest.approx(math.pi / (w * math.sqrt(1 - zeta**2)), rel=0.02)
+
+
+def test_curve1_calibration_against_the_recording():
+    from pathrl.industrial import reference as ref
+
+    prog = ref.curve1_program()
+    slow = ref.measure(execute(prog, 123.05, ControllerParams(model="abb")), 123.05)
+    fast = ref.measure(execute(prog, 300.0, ControllerParams(model="abb")), 300.0)
+    rec_slow, rec_fast = ref.RECORDED[123.05], ref.RECORDED[300.0]
+    # targets the model meets (docs/industrial.md, calibration table; seed 0)
+    for got, rec in ((slow.max_err, rec_slow[0]), (slow.mean_err, rec_slow[1]), (fast.max_err, rec_fast[0]),
+                     (fast.mean_err, rec_fast[1])):
+        assert abs(got / rec - 1) <= 0.2
+    assert slow.speed_std_pct <= 1.0 and abs(slow.mean_speed / 123.05 - 1) < 0.01
+    assert slow.max_at >= 0.8
+    # targets it misses, pinned at the documented measurement so the table stays true
+    assert slow.ramp95_s == pytest.approx(0.18, abs=0.01)  # target <= 0.15 s (recorded 0.10-0.12)
+    assert fast.max_at == pytest.approx(0.798, abs=0.01)  # the max at 79.8 % of the arc: the 80 % boundary
+
+
+def test_tiny_ilc_run_lowers_the_error():
+    x = np.linspace(0.0, 300.0, 601)
+    p = np.stack([1500.0 + 40.0 * np.sin(x / 300.0 * 2 * np.pi), x - 150.0, np.full_like(x, 900.0)], 1)
+    target = Target("arc", p, np.repeat(DOWN[None], len(p), 0), speed=300.0)
+    idx = np.round(np.linspace(0, len(p) - 1, 21)).astype(int)
+    prog = _program(p[idx], zone=10.0)
+    ctrl = ControllerParams(model="abb")
+    for kind in ("p", "filtered"):
+        res = run_ilc(target, prog, 300.0, ILCParams(kind=kind, gain=1.0, k_max=2), ctrl)
+        assert res.executions >= 2 and res.errors.max_pos_mm < res.history[0]
