@@ -201,3 +201,12 @@ def test_training_record_names_the_method_from_the_shipped_config(tmp_path):
         == "not trained (greedy)"
     assert training_method({"controller": {"name": "balance", "policy": "models/upper_body"}}) \
         == "balance around upper_body"
+
+
+def test_time_outs_are_counted_from_the_episodes():
+    """The time-out share is the episodes whose termination is the time limit; None without episode records."""
+    from pathrl.repro.render import time_out_pct
+
+    per = [{"termination": t} for t in ("time_out", "robot_stopped", "time_out", "deviation")]
+    assert time_out_pct({"per_episode": per}) == 50.0
+    assert time_out_pct({"episodes": 4}) is None and time_out_pct(None) is None

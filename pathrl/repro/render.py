@@ -33,7 +33,7 @@ from pathrl.repro.tables import (
     Row,
 )
 
-__all__ = ["render_latex", "render_markdown"]
+__all__ = ["render_latex", "render_markdown", "time_out_pct"]
 
 TITLES = {
     TABLE_I: "Table I: tracking without sensory feedback",
@@ -69,6 +69,15 @@ def _metrics(results: dict[str, Any], row: Row) -> dict[str, Any] | None:
     return results.get("evaluations", {}).get(row.evaluation.id)
 
 
+def time_out_pct(metrics: dict[str, Any] | None) -> float | None:
+    """Share (%) of a result's episodes that ended on the time limit rather than at rest at the end of the path
+    (their duration and deviation are those of the unfinished attempt); None without per-episode records."""
+    per = (metrics or {}).get("per_episode")
+    if not per:
+        return None
+    return 100.0 * sum(p.get("termination") == "time_out" for p in per) / len(per)
+
+
 def _toppra(results: dict[str, Any], row: Row) -> dict[str, Any] | None:
     return results.get("baselines", {}).get(row.evaluation.baseline.id)
 
@@ -87,8 +96,9 @@ def _learned_table(results: dict[str, Any], paper: dict[str, Any], table: str) -
     cols = _columns(paper, table)
     pcols = ptable["columns"]
     lines = [f"## {TITLES[table]}", "",
-             "| row | " + " | ".join(cols) + " | learned / TOPP-RA | episodes | limit violations | trained by |",
-             "|---|" + "---|" * (len(cols) + 4)]
+             "| row | " + " | ".join(cols) + " | learned / TOPP-RA | episodes | time-outs (%) | limit violations | "
+             "trained by |",
+             "|---|" + "---|" * (len(cols) + 5)]
     training = results.get("training") or {}
     csv_rows: list[list[str]] = []
     for row in (r for r in ROWS if r.table == table):
@@ -99,12 +109,16 @@ def _learned_table(results: dict[str, Any], paper: dict[str, Any], table: str) -
         if m is not None and tp is not None and tp.get("toppra_duration_s"):
             rel = f"{m['duration_s'] / tp['toppra_duration_s']:.2f}"
         eps = "–" if m is None else str(m["episodes"])
+        timeouts = time_out_pct(m)
         viol = "–" if m is None else str(m["limit_violations"])
         method = "–" if m is None else training.get(row.evaluation.model, {}).get("method", "–")
-        lines.append(f"| {row.key} | " + " | ".join(cells) + f" | {rel} | {eps} | {viol} | {method} |")
+        lines.append(f"| {row.key} | " + " | ".join(cells) + f" | {rel} | {eps} | {_fmt(timeouts, 1)} | {viol} | "
+                     f"{method} |")
         for c in cols:
             csv_rows.append([table, row.key, c, "" if m is None or m.get(c) is None else f"{m[c]:.6g}",
                              "" if p.get(c) is None else f"{p[c]:g}"])
+        if timeouts is not None:
+            csv_rows.append([table, row.key, "time_out_pct", f"{timeouts:.6g}", ""])
     return lines, csv_rows
 
 
@@ -278,8 +292,10 @@ def render_markdown(results: dict[str, Any], paper: dict[str, Any], profile: str
     lines = [f"# pathrl: the paper's tables reproduced (profile `{profile}`)", "",
              "Each cell: **ours** / paper (ours / paper). Episodes: random segments of the project's test split "
              "(start U(0, 0.8), end U(start + 0.2, 1) moved forward to a knot; whole paths for ball balancing), "
-             "fixed seed; the deterministic policy and TOPP-RA see the same segments. A dash: no shipped policy "
-             "for that row yet.", ""]
+             "fixed seed; the deterministic policy and TOPP-RA see the same segments. *Time-outs*: the share of "
+             "episodes that ended on the episode's time limit instead of at rest at the end of the path; their "
+             "duration is the time limit and their deviation that of an unfinished attempt, so a row with many "
+             "does not describe finished paths. A dash: no shipped policy for that row yet.", ""]
     csv_rows = [["table", "row", "metric", "ours", "paper"]]
     for table in (TABLE_I, TABLE_I_TEST2, TABLE_II, TABLE_III, TABLE_IV, TABLE_VII, TABLE_VIII):
         body, rows = _learned_table(results, paper, table)

@@ -149,6 +149,7 @@ ROWS: tuple[AdaptRow, ...] = (
              _STUDENT + " trained with the ball measurement frozen (teacher too), evaluated so",
              AdaptEval("on_plate", "iiwa7_trueadapt_on_plate_distill_open_loop", open_loop=True)),
     _ablation_row("no_current_position", "current position", "no_position", "the commanded position"),
+    _scratch_row("no_current_position", "state without current position", "no_position"),
     _ablation_row("no_current_velocity", "current velocity", "no_velocity", "the commanded velocity"),
     _ablation_row("no_current_acceleration", "current acceleration", "no_acceleration", "the commanded acceleration"),
     _ablation_row("no_following_positions", "following positions", "no_following", "the next reference position"),
