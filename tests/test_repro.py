@@ -131,11 +131,12 @@ def test_renderer_hand_checked_cells():
             "98.5 | 0.000 / 0.013 | 7.00 | 5.60 | 1.25 | 50.0 | 90.0 | 0 / 0 |") in md
     assert "| 7.5 | 97.5 | – | – / – | 7.00 |" in md  # the control has no paired columns
     assert "| 0.175 / 0.250 | – | **–** | – / – | – | 97.5 | 98.5 |" in md and "| armar6/random | – |" in md
-    # every learned table says how each row's policy was trained (a dash without a record)
+    # every learned table says how each row's policy was trained (a dash without a record); no episode records: no
+    # time-out share (a dash)
     table_i = md.split("## Table I: tracking without sensory feedback")[1].split("##")[0]
     table_ii = md.split("## Table II:")[1].split("##")[0]
-    assert "| 1200 | 0 | DAgger from law_tracker |" in table_i and "| 1200 | 0 | PPO |" in table_ii
-    assert "| 1200 | 0 | – |" in md  # armar4_random (Table IV): evaluated, no training record
+    assert "| 1200 | – | 0 | DAgger from law_tracker |" in table_i and "| 1200 | – | 0 | PPO |" in table_ii
+    assert "| 1200 | – | 0 | – |" in md  # armar4_random (Table IV): evaluated, no training record
     # budgets: how each policy was trained (a dash for a summary without a config beside it)
     assert "| iiwa7_random | PPO | 600 | 39.3 | 4096 | 27 |" in md and "| iiwa7_ball_balancing_reward | – | 900 |" in md
     # Table VI's Ruckig and greedy columns: duration, deviation, learned / baseline, violations
