@@ -2,17 +2,28 @@
 
 The same algorithm as :mod:`pathrl.paths.spline` + :func:`pathrl.paths.pathset.build_pathset` (natural cubic spline
 over the chord-length parameter, arc length of a polyline through ~1 sample per ``ARC_LENGTH_STEP`` rad, knots by
-distance or integrated curvature, positions every ``table_step`` rad), with two changes that cost nothing in
-accuracy: the spline is evaluated in its piecewise-polynomial form (scipy's ``CubicSpline``, Horner) instead of
-de Boor's recursion, and each dense evaluation is done once and shared: the curvature strategy's arc-length table
-of its base spline serves both the curvature integral and the knot placement. Results agree with the dataset
-pipeline to float rounding (tests/test_follower_endgame.py: knots and tables to 1e-9 rad on the test paths).
+distance or integrated curvature, positions every ``table_step`` rad), computed with less work, none of it changing
+the result beyond float rounding:
+
+- the spline is fitted by one LAPACK tridiagonal solve (``dgtsv``, second derivatives, natural ends) and evaluated
+  in piecewise-polynomial form (scipy's ``PPoly``, Horner) instead of de Boor's recursion;
+- the arc-length polyline is not evaluated joint by joint: between two samples u and u + h of one cubic piece the
+  step is ``q(u + h) - q(u) = h (alpha x^2 + beta x + gamma)`` (x = u - the piece's start; alpha, beta, gamma: (M,)
+  per piece), so its squared length is a quartic in x whose five coefficients are dot products per piece. The
+  ~L / ARC_LENGTH_STEP steps then cost a scalar quartic each, not M cubics; the few steps across a piece boundary
+  are evaluated directly;
+- each dense evaluation is done once and shared: the curvature strategy's arc-length table of its base spline serves
+  both the curvature integral and the knot placement.
+
+Results agree with the dataset pipeline to float rounding (tests/test_follower_endgame.py: knots and tables to
+1e-9 rad on the test paths; tests/test_quick_paths.py: the arc-length table against the direct polyline).
 """
 
 from __future__ import annotations
 
 import numpy as np
-from scipy.interpolate import CubicSpline, PPoly
+from scipy.interpolate import PPoly
+from scipy.linalg.lapack import dgtsv
 
 from pathrl.paths.knots import KnotStrategy
 from pathrl.paths.pathset import PathSet
@@ -25,26 +36,87 @@ from pathrl.paths.spline import (
     place_knots,
 )
 
-__all__ = ["quick_knots", "quick_pathset", "quick_pathsets"]
+__all__ = ["arc_table", "natural_spline", "quick_knots", "quick_pathset", "quick_pathsets"]
+
+
+def natural_spline(u: np.ndarray, knots: np.ndarray) -> PPoly:
+    """Natural cubic spline through `knots` (K, M) at increasing parameters `u` (K,), as scipy's
+    ``CubicSpline(u, knots, bc_type="natural")`` (a straight segment for K = 2): coefficients (4, K-1, M)."""
+    h = np.diff(u)
+    slope = np.diff(knots, axis=0) / h[:, None]  # (K-1, M)
+    m = np.zeros_like(knots)  # second derivatives, 0 at both ends
+    diag, rhs = 2.0 * (h[:-1] + h[1:]), 6.0 * np.diff(slope, axis=0)  # the K-2 interior equations
+    if len(u) == 3:  # one equation (LAPACK's wrapper takes no empty off-diagonals)
+        m[1] = rhs[0] / diag[0]
+    elif len(u) > 3:
+        _, _, _, m[1:-1], info = dgtsv(h[1:-1], diag, h[1:-1], rhs)
+        if info != 0:
+            raise PathError("the path's spline cannot be fitted (singular system)")
+    c = np.empty((4, len(u) - 1, knots.shape[1]))
+    c[0] = (m[1:] - m[:-1]) / (6.0 * h[:, None])
+    c[1] = 0.5 * m[:-1]
+    c[2] = slope - h[:, None] * (2.0 * m[:-1] + m[1:]) / 6.0
+    c[3] = knots[:-1]
+    return PPoly.construct_fast(c, u)
 
 
 def _fit(knots: np.ndarray) -> PPoly:
     """Natural cubic spline through deduplicated `knots` (K, M) over the chord-length parameter u in [0, 1]."""
-    u = chord_params(knots)
-    if len(knots) == 2:  # a straight segment
-        slope = (knots[1] - knots[0])[None, None]
-        return PPoly(np.concatenate([slope, knots[:1][None]], axis=0), u)
-    return CubicSpline(u, knots, bc_type="natural")
+    return natural_spline(chord_params(knots), knots)
+
+
+def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise dot products of (P, M) arrays. -> (P,)"""
+    return np.einsum("ij,ij->i", a, b)
+
+
+def arc_table(spline: PPoly, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """(u, s): parameters ``linspace(0, 1, n)`` (n >= 2) of the cubic piecewise polynomial `spline` over [0, 1] and
+    the arc length (same units as the spline's values) of the polyline through its values there, both (n,).
+
+    Equal to ``cumsum(|diff(spline(u))|)`` up to float rounding: steps inside one piece come from the quartic of the
+    module docstring, steps across a piece boundary from the spline's values."""
+    c, breaks = spline.c, spline.x
+    u = np.linspace(0.0, 1.0, n)
+    h = 1.0 / (n - 1)
+    # samples of each piece (u in [breaks[j], breaks[j + 1]), the last piece closed), and of the steps starting there
+    per_piece = np.diff(np.r_[0, np.searchsorted(u, breaks[1:-1], side="left"), n])
+    seg = np.repeat(np.arange(len(breaks) - 1), per_piece)  # (n,)
+    steps = per_piece.copy()
+    steps[-1] -= 1  # no step starts at u = 1
+    alpha = 3.0 * c[0]
+    beta = 3.0 * h * c[0] + 2.0 * c[1]
+    gamma = (h * c[0] + c[1]) * h + c[2]
+    quartic = np.stack([_dot(alpha, alpha), 2.0 * _dot(alpha, beta), _dot(beta, beta) + 2.0 * _dot(alpha, gamma),
+                        2.0 * _dot(beta, gamma), _dot(gamma, gamma)])  # (5, K-1): x^4 ... x^0
+    quartic = np.repeat(quartic, steps, axis=1)  # (5, n-1)
+    x = u[:-1] - np.repeat(breaks[:-1], steps)
+    sq = quartic[0] * x
+    for i in range(1, 5):
+        sq += quartic[i]
+        if i < 4:
+            sq *= x
+    step = h * np.sqrt(np.maximum(sq, 0.0))
+    across = np.flatnonzero(seg[1:] != seg[:-1])
+    if len(across):
+        d = spline(u[across + 1]) - spline(u[across])
+        step[across] = np.sqrt(_dot(d, d))
+    s = np.empty(n)
+    s[0] = 0.0
+    np.cumsum(step, out=s[1:])
+    return u, s
 
 
 def _arc(spline: PPoly, knots: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(u, s): arc length s at parameters u of the polyline through ~1 sample per ARC_LENGTH_STEP rad."""
     d = np.diff(knots, axis=0)
-    chord = float(np.sqrt(np.einsum("ij,ij->i", d, d)).sum())
+    chord = float(np.sqrt(_dot(d, d)).sum())
     n = max(int(np.ceil(chord / ARC_LENGTH_STEP)) + 1, 2)
-    u = np.linspace(0.0, 1.0, n)
-    dq = np.diff(spline(u), axis=0)
-    return u, np.r_[0.0, np.cumsum(np.sqrt(np.einsum("ij,ij->i", dq, dq)))]
+    if len(knots) == 2:  # a straight segment: its values directly (exactly the pipeline's table for a line)
+        u = np.linspace(0.0, 1.0, n)
+        dq = np.diff(spline(u), axis=0)
+        return u, np.r_[0.0, np.cumsum(np.sqrt(_dot(dq, dq)))]
+    return arc_table(spline, n)
 
 
 def _by_distance(knots: np.ndarray, spacing: float) -> np.ndarray:
