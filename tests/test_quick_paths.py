@@ -14,7 +14,15 @@ from scipy.interpolate import CubicSpline
 from pathrl.dataset.io import load_dataset
 from pathrl.paths.knots import KnotStrategy
 from pathrl.paths.pathset import build_pathset
-from pathrl.paths.quick import arc_table, natural_spline, quick_knots, quick_pathset
+from pathrl.paths.quick import (
+    PADDING,
+    _piece_slots,
+    arc_table,
+    evaluate_sorted,
+    natural_spline,
+    quick_knots,
+    quick_pathset,
+)
 from pathrl.paths.spline import chord_params, curvature_integral
 from pathrl.robot.model import load_robot_by_name
 
@@ -47,6 +55,17 @@ def test_arc_table_with_pieces_shorter_than_a_sample_step():
     u, s = arc_table(spline, 11)
     direct = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(spline(u), axis=0), axis=1))]
     assert np.abs(s - direct).max() < 1e-12
+
+
+@pytest.mark.parametrize("even", [True, False])
+def test_evaluate_sorted_is_scipys(even):
+    """Samples spread evenly over the pieces take the per-piece matrix products, uneven ones scipy's evaluation."""
+    knots = _walk(60, 17, 3) if even else np.r_[_walk(59, 17, 3), [[40.0] * 17]]  # one piece far longer
+    spline = natural_spline(chord_params(knots), knots)
+    x = np.linspace(0.0, 1.0, 7001)
+    _, count = _piece_slots(x, spline.x)
+    assert (count.max() * len(count) <= PADDING * len(x)) == even
+    assert np.abs(evaluate_sorted(spline, x) - spline(x)).max() < 1e-13 * np.abs(knots).max()
 
 
 def test_curvature_integral_is_its_plain_formula_bit_for_bit():

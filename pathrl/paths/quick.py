@@ -36,7 +36,8 @@ from pathrl.paths.spline import (
     place_knots,
 )
 
-__all__ = ["arc_table", "natural_spline", "quick_knots", "quick_pathset", "quick_pathsets"]
+__all__ = ["PADDING", "arc_table", "evaluate_sorted", "natural_spline", "quick_knots", "quick_pathset",
+           "quick_pathsets"]
 
 
 def natural_spline(u: np.ndarray, knots: np.ndarray) -> PPoly:
@@ -70,6 +71,45 @@ def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.einsum("ij,ij->i", a, b)
 
 
+#: Largest padding (slots per sample) of the per-piece layout of :func:`evaluate_sorted` before it hands over to scipy.
+PADDING = 2.0
+
+
+def _piece_slots(x: np.ndarray, breaks: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Index of the first sample (n,) sorted `x` in each piece of `breaks` (K,) (x in [breaks[j], breaks[j + 1]), the
+    last piece closed) and how many samples each holds. -> ((K-1,), (K-1,))"""
+    first = np.empty(len(breaks) - 1, dtype=np.int64)
+    first[0] = 0
+    first[1:] = np.searchsorted(x, breaks[1:-1], side="left")
+    count = np.empty_like(first)
+    count[:-1] = first[1:] - first[:-1]
+    count[-1] = len(x) - first[-1]
+    return first, count
+
+
+def evaluate_sorted(spline: PPoly, x: np.ndarray) -> np.ndarray:
+    """``spline(x)`` (n, M) of a cubic piecewise polynomial at sorted parameters `x` (n,) inside its breaks.
+
+    Where the samples spread evenly enough over the pieces (at most PADDING slots per sample), the pieces are laid
+    out as rows of a (pieces, most samples per piece) table and each row is one small matrix product of the powers of
+    its local parameter (P, 4) with its coefficients (4, M): a third faster than scipy's point-by-point Horner, equal
+    to float rounding. Otherwise scipy evaluates."""
+    breaks = spline.x
+    first, count = _piece_slots(x, breaks)
+    width = int(count.max())
+    if width * len(count) > PADDING * len(x) + 64:
+        return spline(x)
+    slot = np.minimum(first[:, None] + np.arange(width), len(x) - 1)  # (K-1, P); padding repeats the last sample
+    dx = x[slot] - breaks[:-1, None]
+    powers = np.empty(dx.shape + (4,))
+    powers[..., 3] = 1.0
+    powers[..., 2] = dx
+    np.multiply(dx, dx, out=powers[..., 1])
+    np.multiply(powers[..., 1], dx, out=powers[..., 0])
+    values = np.matmul(powers, np.ascontiguousarray(spline.c.transpose(1, 0, 2)))  # (K-1, P, M)
+    return values[np.arange(width) < count[:, None]]
+
+
 def arc_table(spline: PPoly, n: int) -> tuple[np.ndarray, np.ndarray]:
     """(u, s): parameters ``linspace(0, 1, n)`` (n >= 2) of the cubic piecewise polynomial `spline` over [0, 1] and
     the arc length (same units as the spline's values) of the polyline through its values there, both (n,).
@@ -79,25 +119,29 @@ def arc_table(spline: PPoly, n: int) -> tuple[np.ndarray, np.ndarray]:
     c, breaks = spline.c, spline.x
     u = np.linspace(0.0, 1.0, n)
     h = 1.0 / (n - 1)
-    # samples of each piece (u in [breaks[j], breaks[j + 1]), the last piece closed), and of the steps starting there
-    per_piece = np.diff(np.r_[0, np.searchsorted(u, breaks[1:-1], side="left"), n])
-    seg = np.repeat(np.arange(len(breaks) - 1), per_piece)  # (n,)
-    steps = per_piece.copy()
-    steps[-1] -= 1  # no step starts at u = 1
+    first, count = _piece_slots(u[:-1], breaks)  # the steps starting in each piece
     alpha = 3.0 * c[0]
     beta = 3.0 * h * c[0] + 2.0 * c[1]
     gamma = (h * c[0] + c[1]) * h + c[2]
     quartic = np.stack([_dot(alpha, alpha), 2.0 * _dot(alpha, beta), _dot(beta, beta) + 2.0 * _dot(alpha, gamma),
-                        2.0 * _dot(beta, gamma), _dot(gamma, gamma)])  # (5, K-1): x^4 ... x^0
-    quartic = np.repeat(quartic, steps, axis=1)  # (5, n-1)
-    x = u[:-1] - np.repeat(breaks[:-1], steps)
+                        2.0 * _dot(beta, gamma), _dot(gamma, gamma)]) * (h * h)  # (5, K-1): x^4 ... x^0
+    width = int(count.max())
+    if width * len(count) <= PADDING * (n - 1) + 64:  # one row per piece: no per-step copies of its coefficients
+        keep = np.arange(width) < count[:, None]
+        x = u[np.minimum(first[:, None] + np.arange(width), n - 2)] - breaks[:-1, None]  # (K-1, P)
+        quartic = quartic[..., None]
+    else:
+        keep = None
+        x = u[:-1] - np.repeat(breaks[:-1], count)
+        quartic = np.repeat(quartic, count, axis=1)  # (5, n-1)
     sq = quartic[0] * x
     for i in range(1, 5):
         sq += quartic[i]
         if i < 4:
             sq *= x
-    step = h * np.sqrt(np.maximum(sq, 0.0))
-    across = np.flatnonzero(seg[1:] != seg[:-1])
+    np.maximum(sq, 0.0, out=sq)
+    step = np.sqrt(sq if keep is None else sq[keep])  # (n-1,)
+    across = first[1:][first[1:] > 0] - 1  # steps from one piece into a later one
     if len(across):
         d = spline(u[across + 1]) - spline(u[across])
         step[across] = np.sqrt(_dot(d, d))
@@ -134,7 +178,7 @@ def _by_curvature(knots: np.ndarray, spacing: float, base_spacing: float, step: 
     u, s = _arc(spline, base)
     grid = np.r_[np.arange(0.0, s[-1], step), s[-1]]
     ug = np.interp(grid, s, u)
-    return dedupe_knots(place_knots(spline, ug, curvature_integral(grid, spline(ug)), spacing))
+    return dedupe_knots(place_knots(spline, ug, curvature_integral(grid, evaluate_sorted(spline, ug)), spacing))
 
 
 def quick_knots(strategy: KnotStrategy, knots: np.ndarray) -> np.ndarray:
@@ -158,7 +202,7 @@ def _table(knots: np.ndarray, table_step: float) -> tuple[np.ndarray, np.ndarray
     grid = np.r_[np.arange(0.0, length, table_step), length]
     knot_s = np.interp(chord_params(knots), u, s)
     knot_s[-1] = length
-    t = spline(np.interp(grid, s, u))
+    t = evaluate_sorted(spline, np.interp(grid, s, u))
     j = t.shape[0] - 1
     table = np.empty((j + 2, knots.shape[1]))
     rest = length - (j - 1) * table_step
