@@ -173,7 +173,7 @@ def _by_distance(knots: np.ndarray, spacing: float) -> np.ndarray:
 
 def _by_curvature(knots: np.ndarray, spacing: float, base_spacing: float, step: float = 2e-3) -> np.ndarray:
     """Knots at equal integrated curvature `spacing` after a distance resampling at `base_spacing`."""
-    base = dedupe_knots(_by_distance(knots, base_spacing))
+    base = _by_distance(knots, base_spacing)  # deduplicated
     spline = _fit(base)
     u, s = _arc(spline, base)
     grid = np.r_[np.arange(0.0, s[-1], step), s[-1]]
