@@ -25,6 +25,8 @@ import numpy as np
 import torch
 import yaml
 
+from pathrl.robot.model import RobotSpec
+
 ROOT = Path(__file__).resolve().parents[1]
 BIN = Path(sys.executable).parent
 PAGE = ROOT / "docs" / "your_robot.md"
@@ -76,6 +78,7 @@ class StandInRobot:
         self.q, self.sent, self.max_sends = np.asarray(q0, dtype=np.float64), [], max_sends
 
     def read_position(self) -> np.ndarray:
+        """The robot's joint positions (D,) (rad): the last setpoint sent."""
         return self.q
 
     def send(self, position: np.ndarray, velocity: np.ndarray) -> None:
@@ -87,7 +90,7 @@ class StandInRobot:
             raise RuntimeError(f"the loop did not end within {self.max_sends} decisions")
 
 
-def _waypoints(robot) -> np.ndarray:
+def _waypoints(robot: RobotSpec) -> np.ndarray:
     """Six waypoints (K, M) of a curved joint-space path well inside the robot's position range (rad)."""
     lim = robot.pos_limits[robot.path_index]
     t = np.linspace(0.0, 1.0, 6)[:, None]
@@ -121,7 +124,7 @@ def _run_example(args: list[str], capsys) -> str:
     return capsys.readouterr().out
 
 
-def _check_outcome(prog: str, args: list[str], out: str, knots: np.ndarray) -> None:
+def _check_outcome(prog: str, args: list[str], out: str, knots: np.ndarray | None) -> None:
     """What the command left behind in the scratch directory (relative paths: the page's)."""
     from pathrl.dataset.io import load_dataset
     from pathrl.robot.model import load_robot_by_name
