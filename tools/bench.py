@@ -378,9 +378,10 @@ def main() -> None:
     if not modes or any(m not in ("native", "torch", "eager") for m in modes):
         ap.error(f"--limits: expected a comma-separated subset of native,torch,eager, got {args.limits!r}")
     res = {"machine": {"cpus": os.cpu_count(), "platform": platform.platform(), "torch": torch.__version__,
-                       "native_limits": native.available()}}
+                       "native_limits": native.available(), "load_avg_start": _load()}}
     if args.follower_only:
         _follower_benches(res, quick)
+        res["machine"]["load_avg_end"] = _load()
         out = Path(args.out)
         old = json.loads(out.read_text()) if out.is_file() else {}
         write_json_atomic(out, {**old, **res})
@@ -439,10 +440,20 @@ def main() -> None:
     two = max(res[k]["env_steps_per_s"] for k in (main_key + "_threads2", "env_iiwa7_cores2") if k in res)
     res["kinematic_tracking_over_pybullet_ball"] = two / pyb
     res["kinematic_tracking_1thread_over_pybullet_ball"] = res[main_key]["env_steps_per_s"] / pyb
+    res["machine"]["load_avg_end"] = _load()
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     write_json_atomic(out, res)
     _print(res, out)
+
+
+def _load() -> list[float] | None:
+    """The system's load average over 1, 5 and 15 min (runnable processes; on a shared machine the wall-clock
+    latencies depend on it), or None where the platform has none."""
+    try:
+        return [round(x, 2) for x in os.getloadavg()]
+    except OSError:
+        return None
 
 
 FOLLOWER_MODELS = (("models/iiwa7_random", "datasets/iiwa7/random"), ("models/armar6_random", "datasets/armar6/random"))
@@ -468,7 +479,9 @@ def _print_follower(res: dict) -> None:
     from rich.console import Console
     from rich.table import Table
 
-    t = Table(title="pathrl.deploy.Follower, 1 thread (wall clock; CPU time of the thread)")
+    load = res["machine"].get("load_avg_start")
+    t = Table(title="pathrl.deploy.Follower, 1 thread (wall clock; CPU time of the thread)"
+              + (f", load {load[0]:g} at the start" if load else ""))
     t.add_column("benchmark")
     t.add_column("result", justify="right")
     _follower_rows(t, res)
