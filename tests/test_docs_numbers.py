@@ -19,9 +19,9 @@ import csv
 import functools
 import json
 import re
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
 
 import pytest
 
@@ -183,9 +183,11 @@ RECEIPTS: list[Receipt] = [
       ratio(rcp("iiwa7_random_fast", "duration_s"), t("VI", "iiwa7/random", "toppra_duration_s"))),
     R(README, "1.99 s at 0.75 cm, by PPO 2.15 s at\n2.93 cm, paper 2.44 s at 1.4 cm",
       t("I", "iiwa7/ball_balancing", "duration_s"), t("I", "iiwa7/ball_balancing", "cart_pos_dev_mean_cm"),
-      rcp("iiwa7_ball_balancing_length_lt", "duration_s"), rcp("iiwa7_ball_balancing_length_lt", "cart_pos_dev_mean_cm"),
+      rcp("iiwa7_ball_balancing_length_lt", "duration_s"), rcp("iiwa7_ball_balancing_length_lt",
+      "cart_pos_dev_mean_cm"),
       p("I", "iiwa7/ball_balancing", "duration_s"), p("I", "iiwa7/ball_balancing", "cart_pos_dev_mean_cm")),
-    R(README, "(Table VII, 200 whole test paths in PyBullet)", raw("iiwa7_ball_balancing_residual_in_pybullet", "episodes")),
+    R(README, "(Table VII, 200 whole test paths in PyBullet)", raw("iiwa7_ball_balancing_residual_in_pybullet",
+      "episodes")),
     R(README, "loses no ball (0.0 %) at 2.93 s (paper: 0.3 % at\n2.99 s)",
       t("VII", "residual_path_law_ppo", "ball_fell_pct"), t("VII", "residual_path_law_ppo", "duration_end_of_path_s"),
       p("VII", "balancing_reward", "ball_fell_pct"), p("VII", "balancing_reward", "duration_end_of_path_s")),
@@ -196,7 +198,8 @@ RECEIPTS: list[Receipt] = [
       t("VIII", "controlled_legs/balance_fast", "duration_end_of_path_s"),
       p("VIII", "controlled_legs/balancing_reward", "fell_pct"),
       p("VIII", "controlled_legs/balancing_reward", "duration_end_of_path_s")),
-    R(README, "(32.8 M steps,\n29 min on one thread;", summary("iiwa7_trueadapt_on_plate_ppo_scratch", "env_steps", 1e-6),
+    R(README, "(32.8 M steps,\n29 min on one thread;", summary("iiwa7_trueadapt_on_plate_ppo_scratch", "env_steps",
+      1e-6),
       minutes("iiwa7_trueadapt_on_plate_ppo_scratch")),
     R(README, "ball on 99.9 % of 1000 test trajectories on a plate in PyBullet (paper 89.6 %;",
       t("TA", "on_plate/test_set_scratch", "success_pct"),
@@ -268,8 +271,8 @@ TOPPRA_RAW = {"iiwa7/random": "iiwa7_random_paper", "iiwa7/target_point": "iiwa7
 GREEDY_RAW = {"iiwa7/random": "greedy_iiwa7_random", "iiwa7/target_point": "greedy_iiwa7_target_point",
               "iiwa7/ball_balancing": "greedy_iiwa7_ball_balancing", "armar6/random": "greedy_armar6_random",
               "armar4_fixed/random": "greedy_armar4_random", "armar4_fixed/target_point": "greedy_armar4_target_point"}
-RUCKIG_SLOWER = [derived(lambda r=r: 100 * (t("VI", r, "toppra_ruckig_duration_s")() / t("VI", r, "toppra_duration_s")() - 1),
-                         "Ruckig over TOPP-RA duration, %") for r in I_ROWS]
+RUCKIG_SLOWER = [ratio(t("VI", r, "toppra_ruckig_duration_s"), t("VI", r, "toppra_duration_s")) for r in I_ROWS]
+RUCKIG_SLOWER = [derived(lambda s=s: 100 * (s() - 1), "Ruckig over TOPP-RA duration, % slower") for s in RUCKIG_SLOWER]
 VS_GREEDY = [ratio(t("I", r, "duration_s"), t("VI", r, "greedy_duration_s")) for r in I_ROWS]
 VII = "VII"
 
@@ -278,20 +281,25 @@ RECEIPTS += [
     R(RES, "the 2-core reference machine", const(2, "describes the machine")),
     R(RES, "at 1.08x (iiwa7 target points) to 1.18x (iiwa7 ball-balancing paths) TOPP-RA",
       vs_toppra("iiwa7/target_point"), vs_toppra("iiwa7/ball_balancing")),
-    R(RES, "(1.22x to 1.64x TOPP-RA on the same rows)", lo(*map(ppo_vs_toppra, I_ROWS)), hi(*map(ppo_vs_toppra, I_ROWS))),
+    R(RES, "(1.22x to 1.64x TOPP-RA on the same rows)", lo(*map(ppo_vs_toppra, I_ROWS)), hi(*map(ppo_vs_toppra,
+      I_ROWS))),
     # iiwa7 random
-    R(RES, "Learned / TOPP-RA = **1.12 at 1.8 cm**", vs_toppra("iiwa7/random"), t("I", "iiwa7/random", "cart_pos_dev_mean_cm")),
-    R(RES, "(3.32 s; the paper's policy: about\n1.44 against a TOPP-RA as strict as ours, at 3.3 cm), 3.34 s at 1.77 cm "
+    R(RES, "Learned / TOPP-RA = **1.12 at 1.8 cm**", vs_toppra("iiwa7/random"), t("I", "iiwa7/random",
+      "cart_pos_dev_mean_cm")),
+    R(RES, "(3.32 s; the paper's policy: about\n1.44 against a TOPP-RA as strict as ours, at 3.3 cm), 3.34 s at 1.77 "
+      "cm "
            "on the second test split, 0 violations.",
       t("I", "iiwa7/random", "duration_s"),
       ratio(p("I", "iiwa7/random", "duration_s"), t("VI", "iiwa7/random", "toppra_duration_s")),
       p("I", "iiwa7/random", "cart_pos_dev_mean_cm"), *row_I2("iiwa7/random"),
       raw("iiwa7_random_track_distill", "limit_violations")),
-    R(RES, "`+experiment=iiwa7_random_track_distill`, 1500 iterations of 1024 envs, 24.6 M\nsteps, 25 min on one thread",
+    R(RES, "`+experiment=iiwa7_random_track_distill`, 1500 iterations of 1024 envs, 24.6 M\nsteps, 25 min on one "
+      "thread",
       *budget("iiwa7_random_track_distill")),
     R(RES, "The paper's quality came after 100 iterations, **2.0 min** (3.36 s at 1.93 cm); from\niteration 200 on the "
            "student stays within 3.29-3.34 s and 1.72-1.90 cm",
-      derived(lambda: _dig(_json(TTQ), "runs.0.points.1.iteration") - 1, "the evaluation after 100 iterations (1-based)"),
+      derived(lambda: _dig(_json(TTQ), "runs.0.points.1.iteration") - 1, "the evaluation after 100 iterations "
+      "(1-based)"),
       file(TTQ, "runs.0.minutes_to_target"), file(TTQ, "runs.0.points.1.duration_s"),
       file(TTQ, "runs.0.points.1.cart_pos_dev_mean_cm"),
       const(200, "where the quoted range starts"),
@@ -299,7 +307,8 @@ RECEIPTS += [
       ttq_after("cart_pos_dev_mean_cm", min), ttq_after("cart_pos_dev_mean_cm", max)),
     R(RES, "the best was 1.22 at 3.3 cm (`models/iiwa7_random_fast`, 3.63 s)", ppo_vs_toppra("iiwa7/random"),
       rcp("iiwa7_random_fast", "cart_pos_dev_mean_cm"), rcp("iiwa7_random_fast", "duration_s")),
-    R(RES, "(1.32 at 2.9 cm) trained on at path-length weight 6 (`models/iiwa7_random_continue`, 300 iterations, 8 min: "
+    R(RES, "(1.32 at 2.9 cm) trained on at path-length weight 6 (`models/iiwa7_random_continue`, 300 iterations, 8 "
+      "min: "
            "1.28 at\n3.0 cm), then at weight 9 with the action noise annealed to 0.01 (200 iterations: 1.22)",
       ratio(raw("iiwa7_random", "duration_s"), t("VI", "iiwa7/random", "toppra_duration_s")),
       raw("iiwa7_random", "cart_pos_dev_mean_cm"), cfg("iiwa7_random_continue", "reward.terms.path_length.weight"),
@@ -311,7 +320,8 @@ RECEIPTS += [
     R(RES, "The default reward weights path length 4.0 against deviation 0.9 + 0.9",
       cfg("iiwa7_random", "reward.terms.path_length.weight"), cfg("iiwa7_random", "reward.terms.deviation_max.weight"),
       cfg("iiwa7_random", "reward.terms.deviation_mean.weight")),
-    R(RES, "the authors' own weights (2.0)", cfg("iiwa7_random_length_eq_deviation", "reward.terms.path_length.weight")),
+    R(RES, "the authors' own weights (2.0)", cfg("iiwa7_random_length_eq_deviation",
+      "reward.terms.path_length.weight")),
     R(RES, "the README's table: 1.62 at 2.5 cm",
       ratio(raw("iiwa7_random_length_eq_deviation", "duration_s"), t("VI", "iiwa7/random", "toppra_duration_s")),
       raw("iiwa7_random_length_eq_deviation", "cart_pos_dev_mean_cm")),
@@ -321,15 +331,18 @@ RECEIPTS += [
       *[t("III", f"knots_{k}", "cart_pos_dev_mean_cm") for k in (5, 7, 9)],
       *[p("III", f"knots_{k}", "duration_s") for k in (5, 7, 9)]),
     # target points
-    R(RES, "The Table I row: **3.79 s at 2.90 cm**, 1.08x TOPP-RA, 0 violations (paper 4.99 s at 3.7 cm; second test split\n"
+    R(RES, "The Table I row: **3.79 s at 2.90 cm**, 1.08x TOPP-RA, 0 violations (paper 4.99 s at 3.7 cm; second test "
+      "split\n"
            "3.80 s at 2.89 cm)", *row_I("iiwa7/target_point", "iiwa7_target_point_track_distill"),
       *row_I2("iiwa7/target_point")),
-    R(RES, "(500\niterations of 1024 envs, 8.2 M steps, 9.4 min on one thread)", *budget("iiwa7_target_point_track_distill")),
+    R(RES, "(500\niterations of 1024 envs, 8.2 M steps, 9.4 min on one thread)",
+      *budget("iiwa7_target_point_track_distill")),
     R(RES, "(`models/iiwa7_target_point`, 1200 iterations, 19 s budget, path length weighted 6\ninstead of 4) reaches "
            "4.84 s at 3.1 cm, 1.38x TOPP-RA (paper 4.99 s at 3.7 cm; the paper's policy is 1.43x our\nTOPP-RA); "
            "a random-paths policy on these paths: 3.78 s at 8.2 cm",
       summary("iiwa7_target_point", "iterations"), cfg("iiwa7_target_point", "env.episode_budget_s"),
-      cfg("iiwa7_target_point", "reward.terms.path_length.weight"), cfg("iiwa7_random", "reward.terms.path_length.weight"),
+      cfg("iiwa7_target_point", "reward.terms.path_length.weight"), cfg("iiwa7_random",
+      "reward.terms.path_length.weight"),
       rcp("iiwa7_target_point", "duration_s"), rcp("iiwa7_target_point", "cart_pos_dev_mean_cm"),
       ppo_vs_toppra("iiwa7/target_point"), p("I", "iiwa7/target_point", "duration_s"),
       p("I", "iiwa7/target_point", "cart_pos_dev_mean_cm"),
@@ -343,29 +356,36 @@ RECEIPTS += [
       raw("iiwa7_ball_balancing_track_distill", "limit_violations"), p("I", "iiwa7/ball_balancing", "duration_s"),
       p("I", "iiwa7/ball_balancing", "cart_pos_dev_mean_cm"), *row_I2("iiwa7/ball_balancing")),
     R(RES, "the paper's state: 5\ndistance knots", cfg("iiwa7_ball_balancing_track_distill", "knots.n_state")),
-    R(RES, "1500 iterations of 1024 envs, 24.6 M\nsteps, 23 min on one thread", *budget("iiwa7_ball_balancing_track_distill")),
+    R(RES, "1500 iterations of 1024 envs, 24.6 M\nsteps, 23 min on one thread",
+      *budget("iiwa7_ball_balancing_track_distill")),
     R(RES, "It met the paper's row after 100 iterations, 1.6 min of training",
-      derived(lambda: _dig(_json("results/time_to_quality/iiwa7_ball_balancing/curve.json"), "runs.0.points.1.iteration") - 1,
+      derived(lambda: _dig(_json("results/time_to_quality/iiwa7_ball_balancing/curve.json"),
+      "runs.0.points.1.iteration") - 1,
               "the evaluation after 100 iterations (1-based)"),
       file("results/time_to_quality/iiwa7_ball_balancing/curve.json", "runs.0.minutes_to_target")),
-    R(RES, "(400 iterations from scratch, path length weighted 1) at 2.15 s and 2.93 cm, the policy at weight 4 the ball runs start\n"
+    R(RES, "(400 iterations from scratch, path length weighted 1) at 2.15 s and 2.93 cm, the policy at weight 4 the "
+      "ball runs start\n"
            "from (`models/iiwa7_ball_balancing`) at 2.02 s and 3.85 cm",
       summary("iiwa7_ball_balancing_length_lt", "iterations"),
       cfg("iiwa7_ball_balancing_length_lt", "reward.terms.path_length.weight"),
-      rcp("iiwa7_ball_balancing_length_lt", "duration_s"), rcp("iiwa7_ball_balancing_length_lt", "cart_pos_dev_mean_cm"),
+      rcp("iiwa7_ball_balancing_length_lt", "duration_s"), rcp("iiwa7_ball_balancing_length_lt",
+      "cart_pos_dev_mean_cm"),
       cfg("iiwa7_ball_balancing", "reward.terms.path_length.weight"),
       rcp("iiwa7_ball_balancing", "duration_s"), rcp("iiwa7_ball_balancing", "cart_pos_dev_mean_cm")),
     # ARMAR-6, ARMAR-4
-    R(RES, "ARMAR-6 random, the Table I row: **3.32 s at 2.86 cm**, 1.14x TOPP-RA, 0 violations (paper 4.98 s at 5.5 cm; "
+    R(RES, "ARMAR-6 random, the Table I row: **3.32 s at 2.86 cm**, 1.14x TOPP-RA, 0 violations (paper 4.98 s at 5.5 "
+      "cm; "
            "second test\nsplit 3.32 s at 2.82 cm)", *row_I("armar6/random", "armar6_random_track_distill"),
       *row_I2("armar6/random")),
     R(RES, "(500\niterations of 1024 envs, 8.2 M steps, 11 min on one thread)", *budget("armar6_random_track_distill")),
-    R(RES, "500 iterations at\npath-length weight 2, then 300 more at 0.5, 55 min in all): 4.54 s at 6.0 cm, 1.57x TOPP-RA.",
+    R(RES, "500 iterations at\npath-length weight 2, then 300 more at 0.5, 55 min in all): 4.54 s at 6.0 cm, 1.57x "
+      "TOPP-RA.",
       summary("armar6_random", "iterations"), cfg("armar6_random", "reward.terms.path_length.weight"),
       summary("armar6_random_continue", "iterations"), cfg("armar6_random_continue", "reward.terms.path_length.weight"),
       minutes("armar6_random", "armar6_random_continue"), rcp("armar6_random_continue", "duration_s"),
       rcp("armar6_random_continue", "cart_pos_dev_mean_cm"), ppo_vs_toppra("armar6/random")),
-    R(RES, "ARMAR-4 random, the Table I row: **3.27 s at 1.77 cm**, 1.15x TOPP-RA, 0 violations\n(paper 5.09 s at 3.3 cm; "
+    R(RES, "ARMAR-4 random, the Table I row: **3.27 s at 1.77 cm**, 1.15x TOPP-RA, 0 violations\n(paper 5.09 s at 3.3 "
+      "cm; "
            "second test split 3.25 s at 1.76 cm)", *row_I("armar4_fixed/random", "armar4_random_track_distill"),
       *row_I2("armar4_fixed/random")),
     R(RES, "(8.2 M steps, 500 iterations, 13 min on one thread)",
@@ -378,14 +398,17 @@ RECEIPTS += [
     R(RES, "the authors' length weight ratio; 4.52 s at 5.6 cm) with its 18 output offsets\nsearched on the training "
            "return (`bias_search`, `pathrl/train/bias_search.py`; 10 min on one thread)",
       raw("armar4_random", "duration_s"), raw("armar4_random", "cart_pos_dev_mean_cm"),
-      derived(lambda: len(_json("models/armar4_random_bias/summary.json")["bias_search"]["offsets"]), "searched offsets"),
+      derived(lambda: len(_json("models/armar4_random_bias/summary.json")["bias_search"]["offsets"]), "searched "
+      "offsets"),
       minutes("armar4_random_bias")),
     R(RES, "`models/armar4_random` gives 4.08 s at 6.7 cm", t("IV", "armar4_fixed", "duration_s"),
       t("IV", "armar4_fixed", "cart_pos_dev_mean_cm")),
-    R(RES, "ARMAR-4 target points, the Table I row: **3.88 s at 1.63 cm**, 1.11x TOPP-RA, 0 violations (paper 5.48 s at "
+    R(RES, "ARMAR-4 target points, the Table I row: **3.88 s at 1.63 cm**, 1.11x TOPP-RA, 0 violations (paper 5.48 s "
+      "at "
            "3.6 cm;\nsecond test split 3.88 s at 1.63 cm)",
       *row_I("armar4_fixed/target_point", "armar4_target_point_track_distill"), *row_I2("armar4_fixed/target_point")),
-    R(RES, "500 iterations of 1024 envs, 8.2 M steps, 14 min on one thread", *budget("armar4_target_point_track_distill")),
+    R(RES, "500 iterations of 1024 envs, 8.2 M steps, 14 min on one thread",
+      *budget("armar4_target_point_track_distill")),
     R(RES, "(`models/armar4_target_point`, 800 iterations, the authors' 20 s ARMAR budget): 6.02 s at\n4.1 cm, 1.72x "
            "TOPP-RA (paper 5.48 s at 3.6 cm). Six continuation steps",
       summary("armar4_target_point", "iterations"), cfg("armar4_target_point", "env.episode_budget_s"),
@@ -395,7 +418,8 @@ RECEIPTS += [
     R(RES, "re-exploring at path-length weight 6", cfg("armar4_target_point_fast", "reward.terms.path_length.weight")),
     R(RES, "`_fast_continue2`, `_fast_continue3`: 5.54 s at 3.67 cm, then the path length weighted 8 for\n"
            "`models/armar4_target_point_faster`): 5.48 s at 3.75 cm, 1.57x TOPP-RA",
-      raw("armar4_target_point_fast_continue3", "duration_s"), raw("armar4_target_point_fast_continue3", "cart_pos_dev_mean_cm"),
+      raw("armar4_target_point_fast_continue3", "duration_s"), raw("armar4_target_point_fast_continue3",
+      "cart_pos_dev_mean_cm"),
       cfg("armar4_target_point_faster", "reward.terms.path_length.weight"),
       rcp("armar4_target_point_faster", "duration_s"), rcp("armar4_target_point_faster", "cart_pos_dev_mean_cm"),
       ppo_vs_toppra("armar4_fixed/target_point")),
@@ -403,8 +427,10 @@ RECEIPTS += [
       t("VIII", "fixed_legs/no_balancing_reward", "fell_pct"),
       raw("armar4_target_point_in_pybullet", "episodes"), p("VIII", "fixed_legs/no_balancing_reward", "fell_pct")),
     R(RES, "(300 PyBullet iterations, 0.3 M steps, 23 min), it falls in 8.0 % (paper 5.3 %); with the 12\nleg joints "
-           "controlled as well (300 iterations, 33 min) in 6.5 % (paper 0.8 %), at 5.91 s end-of-path duration and\n5.1 cm.",
-      summary("armar4_target_point_balancing", "iterations"), summary("armar4_target_point_balancing", "env_steps", 1e-6),
+           "controlled as well (300 iterations, 33 min) in 6.5 % (paper 0.8 %), at 5.91 s end-of-path duration "
+           "and\n5.1 cm.",
+      summary("armar4_target_point_balancing", "iterations"), summary("armar4_target_point_balancing", "env_steps",
+      1e-6),
       minutes("armar4_target_point_balancing"), t("VIII", "fixed_legs/balancing_reward", "fell_pct"),
       p("VIII", "fixed_legs/balancing_reward", "fell_pct"),
       derived(lambda: len(_dig(__import__("yaml").safe_load(
@@ -413,7 +439,8 @@ RECEIPTS += [
               (ROOT / "models/armar4_legs_target_point_balancing/config.yaml").read_text()), "robot.path_joints")),
           "joints that are not path joints: the legs"),
       summary("armar4_legs_target_point_balancing", "iterations"), minutes("armar4_legs_target_point_balancing"),
-      t("VIII", "controlled_legs/balancing_reward", "fell_pct"), p("VIII", "controlled_legs/balancing_reward", "fell_pct"),
+      t("VIII", "controlled_legs/balancing_reward", "fell_pct"), p("VIII", "controlled_legs/balancing_reward",
+      "fell_pct"),
       t("VIII", "controlled_legs/balancing_reward", "duration_end_of_path_s"),
       t("VIII", "controlled_legs/balancing_reward", "cart_pos_dev_mean_cm")),
     R(RES, "stays 2 cm ahead of them; no learning) falls\nin 1.0 % of the 200 Table VIII episodes",
@@ -421,25 +448,31 @@ RECEIPTS += [
       t("VIII", "controlled_legs/balance_controller", "fell_pct"),
       raw("armar4_legs_balance_controller_in_pybullet", "episodes")),
     R(RES, "inside the feet (-4.5 to +10 cm of the\nankles) and a 0.3 s preview",
-      cfg("armar4_legs_balance_dynamic", "controller.zmp_min", 100), cfg("armar4_legs_balance_dynamic", "controller.zmp_max", 100),
+      cfg("armar4_legs_balance_dynamic", "controller.zmp_min", 100), cfg("armar4_legs_balance_dynamic",
+      "controller.zmp_max", 100),
       cfg("armar4_legs_balance_dynamic", "controller.preview")),
     R(RES, "**0.0 %** falls, at 5.80 s end-of-path duration (paper 5.59 s:",
       t("VIII", "controlled_legs/balance_dynamic", "fell_pct"),
       t("VIII", "controlled_legs/balance_dynamic", "duration_end_of_path_s"),
       p("VIII", "controlled_legs/balancing_reward", "duration_end_of_path_s")),
-    R(RES, "79 % of the episodes reaching the end in time", t("VIII", "controlled_legs/balance_dynamic", "reached_end_pct")),
+    R(RES, "79 % of the episodes reaching the end in time", t("VIII", "controlled_legs/balance_dynamic",
+      "reached_end_pct")),
     R(RES, "**0.0 %** falls at **5.38 s**\nend-of-path duration (99 % reach the end) and 3.7 cm on the table's plan",
-      t("VIII", "controlled_legs/balance_fast", "fell_pct"), t("VIII", "controlled_legs/balance_fast", "duration_end_of_path_s"),
-      t("VIII", "controlled_legs/balance_fast", "reached_end_pct"), t("VIII", "controlled_legs/balance_fast", "cart_pos_dev_mean_cm")),
+      t("VIII", "controlled_legs/balance_fast", "fell_pct"), t("VIII", "controlled_legs/balance_fast",
+      "duration_end_of_path_s"),
+      t("VIII", "controlled_legs/balance_fast", "reached_end_pct"), t("VIII", "controlled_legs/balance_fast",
+      "cart_pos_dev_mean_cm")),
     # ball on a plate
-    R(RES, "Ball, 200 whole test paths in PyBullet: the tracking policy loses the ball in every episode (100.0 %; paper: 100 %,",
+    R(RES, "Ball, 200 whole test paths in PyBullet: the tracking policy loses the ball in every episode (100.0 %; "
+      "paper: 100 %,",
       raw("iiwa7_ball_balancing_in_pybullet", "episodes"), t(VII, "no_balancing_reward", "ball_fell_pct"),
       p(VII, "no_balancing_reward", "ball_fell_pct")),
     R(RES, "(1500 iterations, 98 M steps, 66 min warm-started from it)\nstill loses it in 87.5 % (paper: 0.3 %)",
       summary("iiwa7_ball_balancing_reward", "iterations"), summary("iiwa7_ball_balancing_reward", "env_steps", 1e-6),
       minutes("iiwa7_ball_balancing_reward"), t(VII, "balancing_reward", "ball_fell_pct"),
       p(VII, "balancing_reward", "ball_fell_pct")),
-    R(RES, "| policy or controller, PyBullet, 200 whole test paths |", raw("iiwa7_ball_tray_controller_in_pybullet", "episodes")),
+    R(RES, "| policy or controller, PyBullet, 200 whole test paths |", raw("iiwa7_ball_tray_controller_in_pybullet",
+      "episodes")),
     R(RES, "| **4.0 %** | 3.68 s |", t(VII, "model_based_feedback", "ball_fell_pct"),
       t(VII, "model_based_feedback", "duration_end_of_path_s")),
     R(RES, "(`open_loop=true`) | 85.0 % |", t(VII, "model_based_feedback/open_loop", "ball_fell_pct")),
@@ -454,7 +487,8 @@ RECEIPTS += [
       t(VII, "model_based_feedback_path_law", "duration_end_of_path_s")),
     R(RES, "| its student | 54.0 % |", t(VII, "distilled_path_law", "ball_fell_pct")),
     R(RES, "(path-length weight 1, 10 min; sensor frozen: 84.0 %) | **2.5 %** | **3.15 s** |",
-      cfg("iiwa7_ball_balancing_finetune_law", "reward.terms.path_length.weight"), minutes("iiwa7_ball_balancing_finetune_law"),
+      cfg("iiwa7_ball_balancing_finetune_law", "reward.terms.path_length.weight"),
+      minutes("iiwa7_ball_balancing_finetune_law"),
       t(VII, "distilled_path_law_ppo/open_loop", "ball_fell_pct"), t(VII, "distilled_path_law_ppo", "ball_fell_pct"),
       t(VII, "distilled_path_law_ppo", "duration_end_of_path_s")),
     R(RES, "150 iterations, 15 min; sensor frozen: 70.0 %) | **0.0 %** | **2.93 s** |",
@@ -464,7 +498,8 @@ RECEIPTS += [
     R(RES, "| paper | 0.3 % | 2.99 s |", p(VII, "balancing_reward", "ball_fell_pct"),
       p(VII, "balancing_reward", "duration_end_of_path_s")),
     R(RES, "The controller and the fine-tuned policies have 0 limit violations.",
-      hi(*[raw(e, "limit_violations") for e in ("iiwa7_ball_tray_controller_in_pybullet", "iiwa7_ball_tray_law_in_pybullet",
+      hi(*[raw(e, "limit_violations") for e in ("iiwa7_ball_tray_controller_in_pybullet",
+      "iiwa7_ball_tray_law_in_pybullet",
                                                 "iiwa7_ball_balancing_finetune_in_pybullet",
                                                 "iiwa7_ball_balancing_finetune_law_in_pybullet",
                                                 "iiwa7_ball_balancing_residual_in_pybullet")])),
@@ -472,7 +507,8 @@ RECEIPTS += [
     R(RES, "loses 90.5 % open loop against\n87.5 % closed loop", t(VII, "balancing_reward/open_loop", "ball_fell_pct"),
       t(VII, "balancing_reward", "ball_fell_pct")),
     R(RES, "with its sensor frozen it loses 94.5 %", t(VII, "distilled_ppo/open_loop", "ball_fell_pct")),
-    R(RES, "still loses 54.0 % at that pace, and PPO from it brings that to 2.5 % at 3.15 s (the earlier chain: 2.5 % at\n3.64 s)",
+    R(RES, "still loses 54.0 % at that pace, and PPO from it brings that to 2.5 % at 3.15 s (the earlier chain: 2.5 % "
+      "at\n3.64 s)",
       t(VII, "distilled_path_law", "ball_fell_pct"), t(VII, "distilled_path_law_ppo", "ball_fell_pct"),
       t(VII, "distilled_path_law_ppo", "duration_end_of_path_s"), t(VII, "distilled_ppo", "ball_fell_pct"),
       t(VII, "distilled_ppo", "duration_end_of_path_s")),
@@ -482,10 +518,12 @@ RECEIPTS += [
       p(VII, "balancing_reward", "duration_end_of_path_s"), t(VII, "residual_path_law_ppo", "cart_pos_dev_mean_cm"),
       p(VII, "balancing_reward", "cart_pos_dev_mean_cm")),
     # Table IX
-    R(RES, "over 20\nepisodes, idle, native limit code: policy + limits 0.6 / 0.7 / 0.5 % for iiwa7 / ARMAR-6 / ARMAR-4, "
+    R(RES, "over 20\nepisodes, idle, native limit code: policy + limits 0.6 / 0.7 / 0.5 % for iiwa7 / ARMAR-6 / "
+      "ARMAR-4, "
            "with simulation\niiwa7 1.9 %, ARMAR-6 4.7 %, ARMAR-4 with legs 14.0 %",
       raw("realtime_iiwa7.json", "policy_and_limits.episodes"),
-      *[raw(f"realtime_{r}.json", "policy_and_limits.max_compute_to_duration_pct") for r in ("iiwa7", "armar6", "armar4_with_legs")],
+      *[raw(f"realtime_{r}.json", "policy_and_limits.max_compute_to_duration_pct") for r in ("iiwa7", "armar6",
+      "armar4_with_legs")],
       *[t("IX", r, "max_compute_to_duration_pct") for r in ("iiwa7", "armar6", "armar4_with_legs")]),
     R(RES, "7.5 / 10.6 / 35.0 % on an i7-8700K",
       *[p("IX", r, "max_compute_to_duration_pct") for r in ("iiwa7", "armar6", "armar4_with_legs")]),
@@ -514,16 +552,20 @@ RECEIPTS += [
       hi(*[pc(r, v, "replan_ms_mean") for r in ("iiwa7", "armar6") for v in ("none", "gentle", "sharp")]),
       const(2, "the window the column is defined with (settled within 2 s)")),
     R(RES, "in 97.5 / 95.5 % (iiwa7, gentle / sharp) and 99.5 / 99.0 %\n(ARMAR-6)",
-      *[t("PC", f"{r}/random/{v}", "settled_in_band_within_2s_pct") for r in ("iiwa7", "armar6") for v in ("gentle", "sharp")]),
-    R(RES, "back at the 95th percentile of the *step*\ndeviation within 2 s after the largest excursion in 80-84 % (iiwa7) "
+      *[t("PC", f"{r}/random/{v}", "settled_in_band_within_2s_pct") for r in ("iiwa7", "armar6") for v in ("gentle",
+      "sharp")]),
+    R(RES, "back at the 95th percentile of the *step*\ndeviation within 2 s after the largest excursion in 80-84 % "
+      "(iiwa7) "
            "and 91-98 % (ARMAR-6), against 85.5 % and\n99.0 % when the path is replaced by itself",
       const(2, "definition"),
       *[f(t("PC", f"{r}/random/{v}", "settled_within_2s_pct") for v in ("gentle", "sharp"))
         for r in ("iiwa7", "armar6") for f in (lambda g: lo(*g), lambda g: hi(*g))],
       t("PC", "iiwa7/random/none", "settled_within_2s_pct"), t("PC", "armar6/random/none", "settled_within_2s_pct")),
     R(RES, "(the policy takes 1.2-1.4x its time from the change to rest)",
-      lo(*[t("PC", f"{r}/random/{v}", "learned_over_toppra") for r in ("iiwa7", "armar6") for v in ("gentle", "sharp")]),
-      hi(*[t("PC", f"{r}/random/{v}", "learned_over_toppra") for r in ("iiwa7", "armar6") for v in ("gentle", "sharp")])),
+      lo(*[t("PC", f"{r}/random/{v}", "learned_over_toppra") for r in ("iiwa7", "armar6") for v in ("gentle",
+      "sharp")]),
+      hi(*[t("PC", f"{r}/random/{v}", "learned_over_toppra") for r in ("iiwa7", "armar6") for v in ("gentle",
+      "sharp")])),
     R(RES, "every row differs from its main split by at most 0.035 s and 0.036 cm", second_split_gap("duration_s"),
       second_split_gap("cart_pos_dev_mean_cm")),
 ]
@@ -570,7 +612,7 @@ def test_every_receipt_matches_its_file():
         if len(nums) != len(r.sources):
             bad.append(f"{r.doc}: {r.text!r}: {len(nums)} numbers, {len(r.sources)} sources")
             continue
-        for (_, q), src in zip(nums, r.sources):
+        for (_, q), src in zip(nums, r.sources, strict=True):
             try:
                 value = src()
             except (KeyError, FileNotFoundError, IndexError) as e:
