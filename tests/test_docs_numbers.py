@@ -3,8 +3,10 @@ it, within the rounding the text shows.
 
 Receipts: `results/tables.csv` (ours and the paper's value of every table cell, written by `make reproduce-tables`),
 `results/raw/` (that command's per-evaluation results), `results/receipts/` (evaluations of shipped policies outside
-the tables), `results/time_to_quality/` and `models/*/summary.json` (training records). `RECEIPTS` below lists, per
-page, passages quoted verbatim and one source per number in them, in order. The test fails when
+the tables), `results/time_to_quality/`, and the shipped models' `summary.json` (training records) and `config.yaml`
+(settings). `RECEIPTS` below lists, per page, passages quoted verbatim and one source per number in them, in order;
+`const` marks the few numbers that are no measurement (a row's name, a window's definition), each with its reason.
+The test fails when
 
 - a quoted number is not its file's value at the quoted number of decimals (a drifted result or an edited page);
 - a passage is no longer on its page (the page was edited: update its receipt with it);
@@ -125,12 +127,6 @@ def const(value: float, why: str) -> Source:
     """Not a measurement: a protocol or config value (a count, a window, a bound), with the reason."""
     assert why
     return lambda: value
-
-
-def tolerance(slack: float, src: Source) -> Source:
-    """A number quoted as approximate ("about"): accepted within `slack` beyond its rounding."""
-    src.slack = slack  # type: ignore[attr-defined]
-    return src
 
 
 # -- the passages ---------------------------------------------------------------------------------------------------
@@ -275,6 +271,10 @@ RUCKIG_SLOWER = [ratio(t("VI", r, "toppra_ruckig_duration_s"), t("VI", r, "toppr
 RUCKIG_SLOWER = [derived(lambda s=s: 100 * (s() - 1), "Ruckig over TOPP-RA duration, % slower") for s in RUCKIG_SLOWER]
 VS_GREEDY = [ratio(t("I", r, "duration_s"), t("VI", r, "greedy_duration_s")) for r in I_ROWS]
 VII = "VII"
+CHANGED = [(r, v) for r in ("iiwa7", "armar6") for v in ("gentle", "sharp")]
+STEP_LEVEL = {r: [t("PC", f"{r}/random/{v}", "settled_within_2s_pct") for v in ("gentle", "sharp")]
+              for r in ("iiwa7", "armar6")}
+CHANGE_VS_TOPPRA = [t("PC", f"{r}/random/{v}", "learned_over_toppra") for r, v in CHANGED]
 
 RECEIPTS += [
     R(RES, "Unless a paragraph says otherwise: 1200 paper-protocol", raw("iiwa7_random_track_distill", "episodes")),
@@ -558,14 +558,10 @@ RECEIPTS += [
       "(iiwa7) "
            "and 91-98 % (ARMAR-6), against 85.5 % and\n99.0 % when the path is replaced by itself",
       const(2, "definition"),
-      *[f(t("PC", f"{r}/random/{v}", "settled_within_2s_pct") for v in ("gentle", "sharp"))
-        for r in ("iiwa7", "armar6") for f in (lambda g: lo(*g), lambda g: hi(*g))],
+      lo(*STEP_LEVEL["iiwa7"]), hi(*STEP_LEVEL["iiwa7"]), lo(*STEP_LEVEL["armar6"]), hi(*STEP_LEVEL["armar6"]),
       t("PC", "iiwa7/random/none", "settled_within_2s_pct"), t("PC", "armar6/random/none", "settled_within_2s_pct")),
     R(RES, "(the policy takes 1.2-1.4x its time from the change to rest)",
-      lo(*[t("PC", f"{r}/random/{v}", "learned_over_toppra") for r in ("iiwa7", "armar6") for v in ("gentle",
-      "sharp")]),
-      hi(*[t("PC", f"{r}/random/{v}", "learned_over_toppra") for r in ("iiwa7", "armar6") for v in ("gentle",
-      "sharp")])),
+      lo(*CHANGE_VS_TOPPRA), hi(*CHANGE_VS_TOPPRA)),
     R(RES, "every row differs from its main split by at most 0.035 s and 0.036 cm", second_split_gap("duration_s"),
       second_split_gap("cart_pos_dev_mean_cm")),
 ]
@@ -591,18 +587,19 @@ def numbers(text: str) -> list[tuple[int, str]]:
     return [(m.start(), m.group(0)) for m in NUMBER.finditer(_blank(text))]
 
 
-def _section(doc: str) -> tuple[str, int]:
+def _section(doc: str) -> str:
     text = (ROOT / doc).read_text()
     start, end = SECTIONS[doc]
     a = text.index(start) if start else 0
     b = text.index(end, a) if end else len(text)
-    return text[a:b], a
+    return text[a:b]
 
 
-def matches(quoted: str, value: float, slack: float = 0.0) -> bool:
+def matches(quoted: str, value: float) -> bool:
+    """`value` rounds to `quoted` at its number of decimals (either way at an exact half)."""
     q = quoted.lstrip("+")
     decimals = len(q.split(".")[1]) if "." in q else 0
-    return abs(value - float(q)) <= 0.5 * 10 ** -decimals + slack + 1e-9
+    return abs(value - float(q)) <= 0.5 * 10 ** -decimals + 1e-9
 
 
 def test_every_receipt_matches_its_file():
@@ -618,19 +615,19 @@ def test_every_receipt_matches_its_file():
             except (KeyError, FileNotFoundError, IndexError) as e:
                 bad.append(f"{r.doc}: {r.text!r}: {q}: no such result ({e!r})")
                 continue
-            if not matches(q, value, getattr(src, "slack", 0.0)):
+            if not matches(q, value):
                 bad.append(f"{r.doc}: {r.text!r}: quotes {q}, its file says {value:.6g}")
     assert not bad, "numbers that do not match their receipts:\n" + "\n".join(bad)
 
 
 def test_every_passage_is_on_its_page():
-    missing = [f"{r.doc}: {r.text!r}" for r in RECEIPTS if r.text not in _section(r.doc)[0]]
+    missing = [f"{r.doc}: {r.text!r}" for r in RECEIPTS if r.text not in _section(r.doc)]
     assert not missing, "receipted passages no longer on their page (update RECEIPTS):\n" + "\n".join(missing)
 
 
 @pytest.mark.parametrize("doc", list(SECTIONS))
 def test_every_number_has_a_receipt(doc):
-    text, _ = _section(doc)
+    text = _section(doc)
     covered = [False] * len(text)
     for r in RECEIPTS:
         if r.doc != doc:
