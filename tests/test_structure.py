@@ -126,8 +126,6 @@ ALLOWED: dict[str, str] = {
     "pathrl.baselines.balance -> pathrl.eval.evaluate": "the balance controller loads its upper-body policy",
     "pathrl.baselines.controllers -> pathrl.baselines.balance": "cycle: balance -> evaluate -> controllers",
     "pathrl.eval.evaluate -> pathrl.baselines.controllers": "cycle: run loading builds a residual run's controller",
-    "pathrl.baselines.ruckig_track -> pathrl.baselines.toppra": "cycle: Ruckig tracking reads TOPP-RA's result",
-    "pathrl.baselines.toppra -> pathrl.baselines.ruckig_track": "cycle: TOPP-RA's plans tracked by Ruckig",
     "pathrl.config.schema -> pathrl.envs.path_change_cfg": "the schema is composed of the env's settings",
     "pathrl.config.schema -> pathrl.envs.tracking_cfg": "the schema is composed of the env's settings",
     "pathrl.dataset.trueadapt -> pathrl.baselines.toppra": "TrueAdapt generation times its trajectories by TOPP-RA",
