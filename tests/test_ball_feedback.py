@@ -20,7 +20,6 @@ from pathrl.baselines.controllers import make_controller
 from pathrl.baselines.tracking import linear_action
 from pathrl.baselines.tray_time_law import TimeLawCfg, TimeLawTable, build_time_laws, tray_time_law
 from pathrl.dataset.io import load_pathset
-from pathrl.envs.feedback import GRAVITY, ROLL_FACTOR, AnalyticBall, FrozenSensor, plate_pose
 from pathrl.envs.rewards import build_reward_terms
 from pathrl.envs.tracking import PathTrackingEnv, TrackingEnvCfg
 from pathrl.eval.rollout import rollout
@@ -30,6 +29,7 @@ from pathrl.paths.knots import KnotStrategy
 from pathrl.paths.segments import full_segments
 from pathrl.robot.kinematics import ForwardKinematics
 from pathrl.robot.model import load_robot_by_name
+from pathrl.sim.feedback import GRAVITY, ROLL_FACTOR, AnalyticBall, FrozenSensor, plate_pose
 
 ROOT = Path(__file__).resolve().parents[1]
 DATASET = ROOT / "datasets" / "iiwa7" / "ball_balancing"

@@ -131,14 +131,10 @@ ALLOWED: dict[str, str] = {
     "pathrl.dataset.trueadapt -> pathrl.baselines.toppra": "TrueAdapt generation times its trajectories by TOPP-RA",
     "pathrl.deploy.export -> pathrl.eval.evaluate": "run loading lives in evaluation",
     "pathrl.deploy.follower -> pathrl.eval.evaluate": "run loading lives in evaluation",
-    "pathrl.envs.factory -> pathrl.envs.registry": "cycle: factory and registry",
-    "pathrl.envs.registry -> pathrl.envs.factory": "cycle: factory and registry",
     "pathrl.robot.external -> pathrl.robot.kinematics": "cycle: a robot by name may be an external robot file",
     "pathrl.robot.external -> pathrl.robot.model": "cycle: a robot by name may be an external robot file",
     "pathrl.robot.kinematics -> pathrl.robot.model": "cycle: a robot by name may be an external robot file",
     "pathrl.robot.model -> pathrl.robot.external": "cycle: a robot by name may be an external robot file",
-    "pathrl.sim.ball_plate -> pathrl.envs.feedback": "the feedback protocol and plate constants live in envs",
-    "pathrl.sim.vec -> pathrl.envs.feedback": "the feedback protocol and plate constants live in envs",
 }
 
 

@@ -22,11 +22,11 @@ from pathrl.baselines.trueadapt_tray import (
 )
 from pathrl.cli.common import CONF_DIR
 from pathrl.dataset.trueadapt import bank_from_arrays
-from pathrl.envs.feedback import GRAVITY, plate_pose
 from pathrl.envs.trueadapt import AdaptEnvCfg, TrueAdaptEnv
 from pathrl.envs.trueadapt_rewards import build_adapt_reward
 from pathrl.limits.check import limit_violations
 from pathrl.robot.model import load_robot_by_name
+from pathrl.sim.feedback import GRAVITY, plate_pose
 
 ROBOT = load_robot_by_name("iiwa7")
 TERMS = OmegaConf.to_container(OmegaConf.load(CONF_DIR / "reward" / "trueadapt_on_plate.yaml"))["terms"]

@@ -15,7 +15,6 @@ from pathrl.baselines.controllers import make_controller
 from pathrl.cli.common import CONF_DIR
 from pathrl.cli.view import main as view_main
 from pathrl.dataset.trueadapt import bank_from_arrays
-from pathrl.envs.feedback import PLATE_SIZE, plate_pose
 from pathrl.envs.trueadapt import AdaptEnvCfg, TrueAdaptEnv
 from pathrl.envs.trueadapt_rewards import build_adapt_reward
 from pathrl.eval.trueadapt_record import record_trueadapt
@@ -23,6 +22,7 @@ from pathrl.logging.mcap_io import read_messages
 from pathrl.logging.schema import TRUEADAPT_EPISODE, TRUEADAPT_ROBOT, TRUEADAPT_STEP
 from pathrl.robot.kinematics import ForwardKinematics
 from pathrl.robot.model import load_robot_by_name
+from pathrl.sim.feedback import PLATE_SIZE, plate_pose
 
 ROBOT = load_robot_by_name("iiwa7")
 TERMS = OmegaConf.to_container(OmegaConf.load(CONF_DIR / "reward" / "trueadapt_on_plate.yaml"))["terms"]

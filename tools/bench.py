@@ -313,7 +313,7 @@ def bench_follower_end(model: str, dataset: str, rate_hz: float = 240.0) -> dict
 def bench_ball_task(backend: str, num_envs: int, seconds: float, workers: int = 2) -> dict:
     """Env steps/s of the ball-on-plate task (tracking + ball feedback) with the analytic torch ball or PyBullet
     (one client per env, `workers` processes): the same MDP, so the ratio is the price of simulating physics."""
-    from pathrl.envs.feedback import AnalyticBall
+    from pathrl.sim.feedback import AnalyticBall
     from pathrl.sim.vec import PyBulletBall
 
     robot = load_robot_by_name("iiwa7")

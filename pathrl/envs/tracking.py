@@ -15,7 +15,7 @@ MDP (paper, Sec. III; original_pathtracking.md 3-7):
   action  one value in [-1, 1] per joint, mapped into the valid acceleration range for the end of the
           next 0.1 s step (jerk/acceleration/velocity/position limits, braking stays possible).
   reward  sum of weighted terms (pathrl.envs.rewards): path length R_l and deviation R_d (+ task terms).
-  task    optional sensory feedback (pathrl.envs.feedback, e.g. a ball on a plate): it sees the step's
+  task    optional sensory feedback (pathrl.sim.feedback, e.g. a ball on a plate): it sees the step's
           control-rate setpoints, adds its sensor values to the state (``feedback_obs``), named values
           for task reward terms, and a failure (ball off the plate) that ends the episode
           (``fail_terminates``).
@@ -58,7 +58,6 @@ from torch import Tensor
 
 from pathrl import native
 from pathrl.envs import terminations as terms
-from pathrl.envs.feedback import Feedback
 from pathrl.envs.observations import (  # observe_state, tcp_observation: moved, re-exported
     active_terms,
     assemble,
@@ -86,6 +85,7 @@ from pathrl.paths.pathset import PathSet, table_position
 from pathrl.paths.segments import Segments, full_segments, sample_segments
 from pathrl.robot.kinematics import ForwardKinematics
 from pathrl.robot.model import RobotSpec
+from pathrl.sim.feedback import Feedback
 
 try:  # rsl-rl is a training dependency; the env works without it (evaluation, tests).
     from rsl_rl.env import VecEnv as _VecEnvBase

@@ -20,8 +20,7 @@ from tensordict import TensorDict
 from pathrl.baselines.controllers import make_controller
 from pathrl.config.migrate import migrate
 from pathrl.dataset.io import load_pathset
-from pathrl.envs.factory import task_cfg
-from pathrl.envs.registry import EVAL_ENV, make_env
+from pathrl.envs.registry import EVAL_ENV, make_env, task_cfg
 from pathrl.envs.terminations import TerminationReason
 from pathrl.envs.tracking import PathTrackingEnv
 from pathrl.eval.metrics import METRIC_KEYS, matched_samples, per_joint_errors, sample_deviations
