@@ -16,7 +16,6 @@ from pathrl.baselines.ball_feedback import (
     quintic_coefficients,
     tray_normal,
 )
-from pathrl.baselines.controllers import make_controller
 from pathrl.baselines.tracking import linear_action
 from pathrl.baselines.tray_time_law import TimeLawCfg, TimeLawTable, build_time_laws, tray_time_law
 from pathrl.dataset.io import load_pathset
@@ -29,6 +28,7 @@ from pathrl.paths.knots import KnotStrategy
 from pathrl.paths.segments import full_segments
 from pathrl.robot.kinematics import ForwardKinematics
 from pathrl.robot.model import load_robot_by_name
+from pathrl.runs import make_controller
 from pathrl.sim.feedback import GRAVITY, ROLL_FACTOR, AnalyticBall, FrozenSensor, plate_pose
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -9,7 +9,6 @@ import numpy as np
 import pytest
 import torch
 
-from pathrl.baselines.controllers import make_controller
 from pathrl.baselines.law_tracker import LawTracker, LawTrackerCfg
 from pathrl.baselines.toppra import solve_plan
 from pathrl.dataset.io import load_pathset
@@ -23,6 +22,7 @@ from pathrl.paths.knots import KnotStrategy
 from pathrl.paths.segments import full_segments, sample_segments
 from pathrl.robot.kinematics import ForwardKinematics
 from pathrl.robot.model import load_robot_by_name
+from pathrl.runs import make_controller
 
 ROOT = Path(__file__).resolve().parents[1]
 DATASET = ROOT / "datasets" / "iiwa7" / "ball_balancing"

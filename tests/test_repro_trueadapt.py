@@ -106,7 +106,7 @@ def test_committed_split_holds_the_1000_test_trajectories(task):
 
 
 def test_a_fresh_checkout_evaluates_on_the_committed_split(tmp_path, monkeypatch):
-    from pathrl.eval.evaluate import committed_split
+    from pathrl.runs import committed_split
 
     (tmp_path / "datasets").symlink_to(ROOT / "datasets")
     monkeypatch.chdir(tmp_path)  # no data/ here

@@ -123,14 +123,9 @@ LAYERS: list[tuple[str, ...]] = [
 
 #: Imports that still go against :data:`LAYERS` or close a cycle, "importer -> imported": reason. Only shrinks.
 ALLOWED: dict[str, str] = {
-    "pathrl.baselines.balance -> pathrl.eval.evaluate": "the balance controller loads its upper-body policy",
-    "pathrl.baselines.controllers -> pathrl.baselines.balance": "cycle: balance -> evaluate -> controllers",
-    "pathrl.eval.evaluate -> pathrl.baselines.controllers": "cycle: run loading builds a residual run's controller",
     "pathrl.config.schema -> pathrl.envs.path_change_cfg": "the schema is composed of the env's settings",
     "pathrl.config.schema -> pathrl.envs.tracking_cfg": "the schema is composed of the env's settings",
     "pathrl.dataset.trueadapt -> pathrl.baselines.toppra": "TrueAdapt generation times its trajectories by TOPP-RA",
-    "pathrl.deploy.export -> pathrl.eval.evaluate": "run loading lives in evaluation",
-    "pathrl.deploy.follower -> pathrl.eval.evaluate": "run loading lives in evaluation",
     "pathrl.robot.external -> pathrl.robot.kinematics": "cycle: a robot by name may be an external robot file",
     "pathrl.robot.external -> pathrl.robot.model": "cycle: a robot by name may be an external robot file",
     "pathrl.robot.kinematics -> pathrl.robot.model": "cycle: a robot by name may be an external robot file",

@@ -12,7 +12,6 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from omegaconf import OmegaConf
 
-from pathrl.baselines.controllers import make_controller
 from pathrl.baselines.trueadapt_tray import (
     AdaptTrayCfg,
     AdaptTrayController,
@@ -26,6 +25,7 @@ from pathrl.envs.trueadapt import AdaptEnvCfg, TrueAdaptEnv
 from pathrl.envs.trueadapt_rewards import build_adapt_reward
 from pathrl.limits.check import limit_violations
 from pathrl.robot.model import load_robot_by_name
+from pathrl.runs import make_controller
 from pathrl.sim.feedback import GRAVITY, plate_pose
 
 ROBOT = load_robot_by_name("iiwa7")

@@ -11,7 +11,6 @@ import pytest
 import torch
 from omegaconf import OmegaConf
 
-from pathrl.baselines.controllers import make_controller
 from pathrl.cli.common import CONF_DIR
 from pathrl.cli.view import main as view_main
 from pathrl.dataset.trueadapt import bank_from_arrays
@@ -22,6 +21,7 @@ from pathrl.logging.mcap_io import read_messages
 from pathrl.logging.schema import TRUEADAPT_EPISODE, TRUEADAPT_ROBOT, TRUEADAPT_STEP
 from pathrl.robot.kinematics import ForwardKinematics
 from pathrl.robot.model import load_robot_by_name
+from pathrl.runs import make_controller
 from pathrl.sim.feedback import PLATE_SIZE, plate_pose
 
 ROBOT = load_robot_by_name("iiwa7")

@@ -114,8 +114,8 @@ def _path_files_as_dataset(run_dir: Path, dataset_path: str | None) -> str | Non
     dataset they were imported into for the run's robot (:func:`pathrl.dataset.waypoints.as_dataset`)."""
     from pathrl.dataset.io import META_FILE
     from pathrl.dataset.waypoints import as_dataset
-    from pathrl.eval.evaluate import load_run
     from pathrl.robot.model import RobotConfigError, load_robot
+    from pathrl.runs import load_run
 
     if dataset_path is None or (Path(dataset_path) / META_FILE).is_file() or not Path(dataset_path).exists():
         return dataset_path
@@ -129,7 +129,8 @@ def _path_files_as_dataset(run_dir: Path, dataset_path: str | None) -> str | Non
 
 def _main(argv: list[str]) -> None:
     from pathrl.dataset.io import DatasetError
-    from pathrl.eval.evaluate import RunError, evaluate, load_run
+    from pathrl.eval.evaluate import evaluate
+    from pathrl.runs import RunError, load_run
 
     if any(a in ("-h", "--help") for a in argv):
         _print_help()

@@ -55,9 +55,9 @@ def _main(argv: list[str]) -> None:
     from pathrl.deploy.export import export_policy
     from pathrl.envs.registry import EVAL_ENV, get_task
     from pathrl.envs.tracking_cfg import TrackingEnvCfg
-    from pathrl.eval.evaluate import RunError, load_run, policy_scale
     from pathrl.paths.knots import KnotStrategy
     from pathrl.robot.model import load_robot
+    from pathrl.runs import RunError, load_run, policy_scale
 
     if any(a in ("-h", "--help") for a in argv):
         _print_help()
