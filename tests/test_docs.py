@@ -160,7 +160,7 @@ def _sweep_jobs(overrides: list[str]) -> list[list[str]]:
 def check_train(args: list[str], capsys) -> None:
     from pathrl.cli import train
     from pathrl.cli.common import compose
-    from pathrl.config.schema import TrainAppCfg
+    from pathrl.schema import TrainAppCfg
 
     concrete, deferred = _split_placeholders(args)
     if "-m" in concrete or "--multirun" in concrete:

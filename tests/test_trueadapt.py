@@ -322,7 +322,7 @@ def test_trajectories_load_and_info_prints_their_statistics(tiny_trueadapt, tiny
 # ------------------------------------------------------------------------------------------------ training
 def test_two_iteration_training_run(tiny_trueadapt, tmp_path):
     from pathrl.cli.common import compose, to_container
-    from pathrl.config.schema import TrainAppCfg
+    from pathrl.schema import TrainAppCfg
     from pathrl.train.runner import train
 
     run_dir = tmp_path / "run"
@@ -337,9 +337,9 @@ def test_two_iteration_training_run(tiny_trueadapt, tmp_path):
 def test_the_pybullet_ball_runs_the_same_env(tiny_trueadapt):
     """task.backend=pybullet (evaluation): the PyBullet scene replaces the analytic ball behind the same env."""
     from pathrl.cli.common import compose, to_container
-    from pathrl.config.schema import TrainAppCfg
     from pathrl.envs.trueadapt import build_trueadapt_env
     from pathrl.eval.trueadapt import evaluate, reference_policy
+    from pathrl.schema import TrainAppCfg
 
     cfg = to_container(compose("train", ["+experiment=iiwa7_trueadapt_in_place", f"dataset.path={tiny_trueadapt.path}",
                                          "task.backend=pybullet", "task.workers=1"], TrainAppCfg))

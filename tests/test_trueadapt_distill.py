@@ -9,8 +9,8 @@ import pytest
 import torch
 
 from pathrl.cli.common import compose, to_container
-from pathrl.config.schema import TrainAppCfg
 from pathrl.logging.mcap_io import read_messages
+from pathrl.schema import TrainAppCfg
 
 
 def _cfg(experiment: str, dataset: Path, run_dir: Path, iterations: int) -> dict:

@@ -149,7 +149,7 @@ def test_the_tool_records_a_controller(tiny_dataset, tmp_path, capsys):
 def test_the_tool_records_a_trained_run(tiny_dataset, tmp_path, capsys):
     """--run loads the run's config (its dataset) and newest checkpoint, as tools/trueadapt_eval.py does."""
     from pathrl.cli.common import compose, to_container
-    from pathrl.config.schema import TrainAppCfg
+    from pathrl.schema import TrainAppCfg
     from pathrl.train.runner import train
 
     run = tmp_path / "run"

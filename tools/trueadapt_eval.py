@@ -25,12 +25,12 @@ from pathlib import Path
 import torch
 
 from pathrl.cli.common import ArgParser, UserError, compose, output_dir, run_cli, to_container
-from pathrl.config.schema import TrainAppCfg
 from pathrl.envs.device import EVAL_DEVICE
 from pathrl.envs.trueadapt import build_trueadapt_env
 from pathrl.eval.trueadapt import ObservingPolicy, evaluate, reference_policy, summary
 from pathrl.eval.trueadapt_limits import LimitCounter
 from pathrl.runs import committed_split
+from pathrl.schema import TrainAppCfg
 
 
 def controller_spec(text: str) -> dict:

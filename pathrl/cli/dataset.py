@@ -115,7 +115,7 @@ def cmd_generate(overrides: Sequence[str]) -> None:
     bad = [o for o in overrides if "=" not in o]
     if bad:
         raise UserError(f"generate: expected key=value overrides, got {bad[0]!r}")
-    from pathrl.config.schema import DatasetAppCfg
+    from pathrl.schema import DatasetAppCfg
 
     cfg = compose("dataset_app", overrides, DatasetAppCfg)
     output_dir(str(cfg.dataset.path), "dataset.path")

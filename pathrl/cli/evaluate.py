@@ -6,7 +6,7 @@
                 [task=ball_on_plate|standing] [backend=pybullet|analytic] [compile_limits=true|false]
                 [open_loop=true|false] [checkpoint=model_K.pt] [dataset.out_of_limits=refuse|clip]
 
-The arguments are Hydra overrides of ``conf/eval_app.yaml`` (schema :class:`pathrl.config.schema.EvalAppCfg`).
+The arguments are Hydra overrides of ``conf/eval_app.yaml`` (schema :class:`pathrl.schema.EvalAppCfg`).
 ``dataset=NAME`` is ``data/<the run's robot>/NAME`` (short for ``dataset.name=NAME``); neither ``dataset`` nor
 ``dataset.path``: the run's own dataset. ``task`` (group ``conf/task``; only its name is used) adds a feedback
 task to a run trained without one (its sensor values stay unobserved); runs with a task are simulated with
@@ -54,7 +54,7 @@ def _print_help() -> None:
     """The usage, the config group (``task``) and every key with its default (``conf/eval_app.yaml``)."""
     from omegaconf import OmegaConf
 
-    from pathrl.config.schema import EvalAppCfg
+    from pathrl.schema import EvalAppCfg
 
     print(__doc__.strip())
     print("\n== Configuration groups ==\nCompose your configuration from those groups (group=option)\n")
@@ -72,7 +72,7 @@ def _path_tasks() -> list[str]:
 
 def _config(argv: list[str]) -> dict[str, Any]:
     """The composed ``eval_app`` config of `argv`, checked (UserError: one line)."""
-    from pathrl.config.schema import EvalAppCfg
+    from pathrl.schema import EvalAppCfg
 
     cfg = key_value_app("eval_app", EvalAppCfg, _arguments(argv), USAGE, _LITERAL, keys=schema_keys(EvalAppCfg))
     checks = [

@@ -3,7 +3,7 @@
 ``PATHRL_ROBOT_PATH`` holds directories and YAML files separated by ``os.pathsep`` (``:``); every ``*.yaml`` in them
 is a robot named by its ``name`` (default: the file's stem), usable as ``robot=NAME`` in every CLI (registered with
 Hydra's config store by the CLI layer) and by :func:`pathrl.robot.model.load_robot_by_name`. A name of a shipped
-robot cannot be reused. The YAML has the keys of ``conf/robot/*.yaml`` (``pathrl.config.schema.RobotCfg``), with
+robot cannot be reused. The YAML has the keys of ``conf/robot/*.yaml`` (``pathrl.schema.RobotCfg``), with
 these differences:
 
 - ``urdf``: a path relative to the YAML's directory, an absolute path, or ``pybullet_data:<file>`` (the URDFs that
