@@ -185,13 +185,13 @@ def check_toppra(args: list[str], monkeypatch) -> None:
 
 
 def check_dataset(args: list[str], monkeypatch) -> None:
-    import pathrl.dataset.generate
+    import pathrl.datagen.generate
     import pathrl.dataset.io
     import pathrl.dataset.kiemel
     import pathrl.dataset.waypoints
     from pathrl.cli import dataset
 
-    monkeypatch.setattr(pathrl.dataset.generate, "generate_dataset", _stop)
+    monkeypatch.setattr(pathrl.datagen.generate, "generate_dataset", _stop)
     monkeypatch.setattr(pathrl.dataset.kiemel, "import_kiemel", _stop)
     monkeypatch.setattr(pathrl.dataset.waypoints, "import_waypoints", _stop)
     monkeypatch.setattr(pathrl.dataset.io, "load_dataset", _stop)

@@ -7,9 +7,9 @@ import inspect
 import pytest
 from omegaconf import OmegaConf
 
-from pathrl.dataset.generate import generate_dataset
-from pathrl.dataset.generators import GENERATORS, get_generator, path_kind
-from pathrl.dataset.generators.defaults import DEFAULT_PARAMS, KINDS
+from pathrl.datagen.generate import generate_dataset
+from pathrl.datagen.generators import GENERATORS, get_generator, path_kind
+from pathrl.datagen.generators.defaults import DEFAULT_PARAMS, KINDS
 from pathrl.dataset.io import DatasetError
 from pathrl.robot.model import CONF_DIR, load_robot_by_name
 

@@ -123,9 +123,6 @@ LAYERS: list[tuple[str, ...]] = [
 
 #: Imports that still go against :data:`LAYERS` or close a cycle, "importer -> imported": reason. Only shrinks.
 ALLOWED: dict[str, str] = {
-    "pathrl.schema -> pathrl.envs.path_change_cfg": "the schema is composed of the env's settings",
-    "pathrl.schema -> pathrl.envs.tracking_cfg": "the schema is composed of the env's settings",
-    "pathrl.dataset.trueadapt -> pathrl.baselines.toppra": "TrueAdapt generation times its trajectories by TOPP-RA",
     "pathrl.robot.external -> pathrl.robot.kinematics": "cycle: a robot by name may be an external robot file",
     "pathrl.robot.external -> pathrl.robot.model": "cycle: a robot by name may be an external robot file",
     "pathrl.robot.kinematics -> pathrl.robot.model": "cycle: a robot by name may be an external robot file",

@@ -15,8 +15,9 @@ from hypothesis import strategies as st
 from omegaconf import OmegaConf
 
 from pathrl.cli.common import CONF_DIR
+from pathrl.datagen.trueadapt import mirror_variants
 from pathrl.dataset.io import DatasetError
-from pathrl.dataset.trueadapt import bank_from_arrays, load_trajectories, mirror_variants
+from pathrl.dataset.trueadapt import bank_from_arrays, load_trajectories
 from pathrl.envs.terminations import TerminationReason
 from pathrl.envs.trueadapt import AdaptEnvCfg, TrueAdaptEnv, clip_to_range
 from pathrl.envs.trueadapt_rewards import (

@@ -108,7 +108,8 @@ def print_limits(ds, out=None) -> None:
 def cmd_generate(overrides: Sequence[str]) -> None:
     """``pathrl-dataset generate key=value ...``: compose ``conf/dataset_app.yaml`` with the overrides, generate the
     dataset and print its summary; bad overrides or generation errors are one-line :class:`UserError`."""
-    from pathrl.dataset.generate import GenerationError, generate_dataset
+    from pathrl.datagen.generate import generate_dataset
+    from pathrl.datagen.generators.context import GenerationError
     from pathrl.dataset.io import DatasetError
     from pathrl.robot.model import RobotConfigError
 
