@@ -20,7 +20,7 @@ from pathrl.baselines.balance import (
     urdf_joint_axes,
 )
 from pathrl.baselines.com import StaticCom
-from pathrl.robot.model import load_robot_by_name
+from pathrl.robot.external import load_robot_by_name
 from pathrl.runs import make_controller
 
 

@@ -26,8 +26,8 @@ from pathrl.limits.check import limit_violations
 from pathrl.limits.feasible import JointLimits, action_to_acceleration
 from pathrl.paths.knots import KnotStrategy
 from pathrl.paths.segments import full_segments
+from pathrl.robot.external import load_robot_by_name
 from pathrl.robot.kinematics import ForwardKinematics
-from pathrl.robot.model import load_robot_by_name
 from pathrl.runs import make_controller
 from pathrl.sim.feedback import GRAVITY, ROLL_FACTOR, AnalyticBall, FrozenSensor, plate_pose
 

@@ -7,13 +7,14 @@ import pytest
 import torch
 from omegaconf import OmegaConf
 
+from pathrl.config.paths import CONF_DIR
 from pathrl.datagen.generate import generate_dataset
 from pathrl.datagen.generators.ball_balancing import ball_constraint_violation
 from pathrl.datagen.generators.defaults import resolve_params
 from pathrl.dataset.io import DatasetError, load_dataset, load_pathset
 from pathrl.paths.knots import KnotStrategy
 from pathrl.paths.spline import sample_uniform
-from pathrl.robot.model import CONF_DIR, load_robot_by_name
+from pathrl.robot.external import load_robot_by_name
 
 torch.set_num_threads(1)
 

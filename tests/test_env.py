@@ -12,7 +12,7 @@ from pathrl.limits.braking import braking_acceleration
 from pathrl.limits.feasible import JointLimits
 from pathrl.paths.pathset import build_pathset
 from pathrl.paths.segments import Segments
-from pathrl.robot.model import load_robot_by_name
+from pathrl.robot.external import load_robot_by_name
 
 REWARD = {"path_length": {"weight": 2.0}, "deviation_max": {"weight": 0.9}, "deviation_mean": {"weight": 0.9},
           "action_saturation": {"weight": 0.4}}

@@ -15,7 +15,7 @@ from pathrl.dataset.io import load_pathset
 from pathrl.envs.rewards import build_reward_terms
 from pathrl.envs.tracking import PathTrackingEnv, TrackingEnvCfg
 from pathrl.paths.knots import KnotStrategy
-from pathrl.robot.model import load_robot_by_name
+from pathrl.robot.external import load_robot_by_name
 from pathrl.sim.feedback import RES_FACTOR, ROLL_FACTOR, AnalyticBall, rolling_resistance
 from pathrl.train.warm_start import WarmStartError, widen_inputs
 

@@ -20,8 +20,8 @@ from pathrl.limits.check import limit_violations
 from pathrl.limits.feasible import JointLimits
 from pathrl.paths.knots import KnotStrategy
 from pathrl.paths.segments import full_segments, sample_segments
+from pathrl.robot.external import load_robot_by_name
 from pathrl.robot.kinematics import ForwardKinematics
-from pathrl.robot.model import load_robot_by_name
 from pathrl.runs import make_controller
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -179,7 +179,7 @@ def test_env_with_more_substeps_than_the_native_step_takes_uses_torch(tiny_datas
     from pathrl.envs.rewards import build_reward_terms
     from pathrl.envs.tracking import PathTrackingEnv, TrackingEnvCfg
     from pathrl.paths.knots import KnotStrategy
-    from pathrl.robot.model import load_robot_by_name
+    from pathrl.robot.external import load_robot_by_name
 
     robot = load_robot_by_name("iiwa7")
     paths = load_pathset(tiny_dataset, "train", KnotStrategy("distance", 0.3), robot=robot)

@@ -122,12 +122,7 @@ LAYERS: list[tuple[str, ...]] = [
 ]
 
 #: Imports that still go against :data:`LAYERS` or close a cycle, "importer -> imported": reason. Only shrinks.
-ALLOWED: dict[str, str] = {
-    "pathrl.robot.external -> pathrl.robot.kinematics": "cycle: a robot by name may be an external robot file",
-    "pathrl.robot.external -> pathrl.robot.model": "cycle: a robot by name may be an external robot file",
-    "pathrl.robot.kinematics -> pathrl.robot.model": "cycle: a robot by name may be an external robot file",
-    "pathrl.robot.model -> pathrl.robot.external": "cycle: a robot by name may be an external robot file",
-}
+ALLOWED: dict[str, str] = {}
 
 
 def _layer(module: str) -> int | None:

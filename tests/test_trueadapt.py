@@ -30,7 +30,7 @@ from pathrl.envs.trueadapt_rewards import (
     on_plate,
 )
 from pathrl.limits.check import limit_violations
-from pathrl.robot.model import load_robot_by_name
+from pathrl.robot.external import load_robot_by_name
 
 ROBOT = load_robot_by_name("iiwa7")
 TERMS = OmegaConf.to_container(OmegaConf.load(CONF_DIR / "reward" / "trueadapt_on_plate.yaml"))["terms"]

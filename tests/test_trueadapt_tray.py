@@ -24,7 +24,7 @@ from pathrl.dataset.trueadapt import bank_from_arrays
 from pathrl.envs.trueadapt import AdaptEnvCfg, TrueAdaptEnv
 from pathrl.envs.trueadapt_rewards import build_adapt_reward
 from pathrl.limits.check import limit_violations
-from pathrl.robot.model import load_robot_by_name
+from pathrl.robot.external import load_robot_by_name
 from pathrl.runs import make_controller
 from pathrl.sim.feedback import GRAVITY, plate_pose
 

@@ -19,8 +19,8 @@ from pathrl.envs.trueadapt_rewards import build_adapt_reward
 from pathrl.eval.trueadapt_record import record_trueadapt
 from pathrl.logging.mcap_io import read_messages
 from pathrl.logging.schema import TRUEADAPT_EPISODE, TRUEADAPT_ROBOT, TRUEADAPT_STEP
+from pathrl.robot.external import load_robot_by_name
 from pathrl.robot.kinematics import ForwardKinematics
-from pathrl.robot.model import load_robot_by_name
 from pathrl.runs import make_controller
 from pathrl.sim.feedback import PLATE_SIZE, plate_pose
 

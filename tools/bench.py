@@ -39,7 +39,8 @@ from pathrl.envs.tracking import PathTrackingEnv, TrackingEnvCfg  # noqa: E402
 from pathrl.eval.limit_fuzz import fuzz_env, fuzz_report  # noqa: E402
 from pathrl.limits.backend import LimitBackend, current  # noqa: E402
 from pathrl.paths.pathset import build_pathset  # noqa: E402
-from pathrl.robot.model import RobotSpec, load_robot_by_name  # noqa: E402
+from pathrl.robot.external import load_robot_by_name
+from pathrl.robot.model import RobotSpec  # noqa: E402
 from pathrl.storage import write_json_atomic  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]

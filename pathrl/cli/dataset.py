@@ -86,7 +86,8 @@ def print_info(meta: Mapping[str, Any], path: str, out=None) -> None:
 def print_limits(ds, out=None) -> None:
     """Per split: do the paths stay inside the position limits of the dataset's robot (if pathrl knows it)?"""
     from pathrl.dataset.limits import LIMIT_TOL, limit_excess
-    from pathrl.robot.model import RobotConfigError, load_robot_by_name
+    from pathrl.robot.external import load_robot_by_name
+    from pathrl.robot.model import RobotConfigError
 
     try:
         robot = load_robot_by_name(str(ds.meta.get("robot")))
@@ -142,7 +143,8 @@ def cmd_import(argv: Sequence[str]) -> None:
     from pathrl.dataset.io import DatasetError
     from pathrl.dataset.kiemel import import_kiemel
     from pathrl.dataset.waypoints import FORMATS, import_waypoints
-    from pathrl.robot.model import RobotConfigError, load_robot_by_name
+    from pathrl.robot.external import load_robot_by_name
+    from pathrl.robot.model import RobotConfigError
 
     ap = _Parser(prog="pathrl-dataset import", add_help=True)
     ap.add_argument("--format", required=True, choices=["kiemel-json", *FORMATS])

@@ -33,7 +33,7 @@ from pathrl.envs.tracking import PathTrackingEnv, TrackingEnvCfg
 from pathrl.limits.check import KINDS, limit_violations
 from pathrl.limits.integrate import interpolate_step
 from pathrl.paths.knots import KnotStrategy
-from pathrl.robot.model import load_robot_by_name
+from pathrl.robot.external import load_robot_by_name
 
 __all__ = ["DATASETS", "STREAMS", "FuzzResult", "fuzz_env", "fuzz_report"]
 
