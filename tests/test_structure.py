@@ -125,19 +125,14 @@ LAYERS: list[tuple[str, ...]] = [
 ALLOWED: dict[str, str] = {}
 
 
+def _package(module: str) -> str | None:
+    """The package (or top-level module) of :data:`LAYERS` that `module` belongs to: the longest listed prefix."""
+    return max((p for ps in LAYERS for p in ps if module == p or module.startswith(p + ".")), key=len, default=None)
+
+
 def _layer(module: str) -> int | None:
-    """Index in :data:`LAYERS` of the package `module` belongs to (the longest listed prefix), None if unlisted."""
-    best = None
-    for i, packages in enumerate(LAYERS):
-        for p in packages:
-            if (module == p or module.startswith(p + ".")) and (best is None or len(p) > len(best[1])):
-                best = (i, p)
-    return best and best[0]
-
-
-def _package(module: str) -> str:
-    """The listed package (or top-level module) of :data:`LAYERS` `module` belongs to."""
-    return max((p for ps in LAYERS for p in ps if module == p or module.startswith(p + ".")), key=len, default=module)
+    """Index in :data:`LAYERS` of the layer of `module`'s package, None if the package is not listed."""
+    return next((i for i, packages in enumerate(LAYERS) if _package(module) in packages), None)
 
 
 def _against_layers() -> list[str]:
@@ -153,6 +148,15 @@ def _against_layers() -> list[str]:
 
 def _unallowed(found: list[str]) -> list[str]:
     return [f for f in found if f"{f.split(':')[0]} -> {f.split(' -> ')[1]}" not in ALLOWED]
+
+
+def test_imports_inside_functions_count_and_annotation_only_ones_do_not(monkeypatch):
+    src = ("from typing import TYPE_CHECKING\n\nif TYPE_CHECKING:\n    from pathrl.eval import evaluate\n\n\n"
+           "def f():\n    from pathrl.train import runner\n")
+    monkeypatch.setitem(MODULES, "pathrl.limits.fake", MODULES["pathrl.limits"])
+    monkeypatch.setitem(TREES, "pathrl.limits.fake", ast.parse(src))
+    assert set(_runtime_imports("pathrl.limits.fake")) == {"pathrl.train", "pathrl.train.runner"}
+    assert "pathrl.limits.fake:8 -> pathrl.train.runner" in _against_layers()
 
 
 def test_every_module_is_in_a_layer():
