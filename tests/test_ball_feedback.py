@@ -20,7 +20,8 @@ from pathrl.baselines.tracking import linear_action
 from pathrl.baselines.tray_time_law import TimeLawCfg, TimeLawTable, build_time_laws, tray_time_law
 from pathrl.dataset.io import load_pathset
 from pathrl.envs.rewards import build_reward_terms
-from pathrl.envs.tracking import PathTrackingEnv, TrackingEnvCfg
+from pathrl.envs.tracking import PathTrackingEnv
+from pathrl.envs.tracking_cfg import TrackingEnvCfg
 from pathrl.eval.rollout import rollout
 from pathrl.limits.check import limit_violations
 from pathrl.limits.feasible import JointLimits, action_to_acceleration

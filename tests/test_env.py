@@ -5,9 +5,11 @@ import pytest
 import torch
 from tensordict import TensorDict
 
+from pathrl.envs.observations import tcp_observation
 from pathrl.envs.reference import ReferencePath, ReferenceTrackingEnv
 from pathrl.envs.rewards import StepQuantities, build_reward_terms, path_length, tcp_deviation
-from pathrl.envs.tracking import PathTrackingEnv, TrackingEnvCfg, tcp_observation
+from pathrl.envs.tracking import PathTrackingEnv
+from pathrl.envs.tracking_cfg import TrackingEnvCfg
 from pathrl.limits.braking import braking_acceleration
 from pathrl.limits.feasible import JointLimits
 from pathrl.paths.pathset import build_pathset

@@ -13,7 +13,8 @@ from tensordict import TensorDict
 
 from pathrl.dataset.io import load_pathset
 from pathrl.envs.rewards import build_reward_terms
-from pathrl.envs.tracking import PathTrackingEnv, TrackingEnvCfg
+from pathrl.envs.tracking import PathTrackingEnv
+from pathrl.envs.tracking_cfg import TrackingEnvCfg
 from pathrl.paths.knots import KnotStrategy
 from pathrl.robot.external import load_robot_by_name
 from pathrl.sim.feedback import RES_FACTOR, ROLL_FACTOR, AnalyticBall, rolling_resistance

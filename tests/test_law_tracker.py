@@ -13,7 +13,8 @@ from pathrl.baselines.law_tracker import LawTracker, LawTrackerCfg
 from pathrl.baselines.toppra import solve_plan
 from pathrl.dataset.io import load_pathset
 from pathrl.envs.rewards import build_reward_terms
-from pathrl.envs.tracking import PathTrackingEnv, TrackingEnvCfg
+from pathrl.envs.tracking import PathTrackingEnv
+from pathrl.envs.tracking_cfg import TrackingEnvCfg
 from pathrl.eval.metrics import matched_samples, sample_deviations
 from pathrl.eval.rollout import rollout
 from pathrl.limits.check import limit_violations

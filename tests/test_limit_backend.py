@@ -14,7 +14,7 @@ from test_env import make_env
 
 from pathrl import native
 from pathrl.config.migrate import ADDED_KEYS, migrate
-from pathrl.envs.tracking import TrackingEnvCfg
+from pathrl.envs.tracking_cfg import TrackingEnvCfg
 from pathrl.envs.trueadapt import AdaptEnvCfg
 from pathrl.limits import kernels
 from pathrl.limits.backend import DEFAULT, LimitBackend, current

@@ -177,7 +177,8 @@ def test_env_with_more_substeps_than_the_native_step_takes_uses_torch(tiny_datas
     """substeps > 64 is a valid config: the env steps with the torch kernel instead of failing."""
     from pathrl.dataset.io import load_pathset
     from pathrl.envs.rewards import build_reward_terms
-    from pathrl.envs.tracking import PathTrackingEnv, TrackingEnvCfg
+    from pathrl.envs.tracking import PathTrackingEnv
+    from pathrl.envs.tracking_cfg import TrackingEnvCfg
     from pathrl.paths.knots import KnotStrategy
     from pathrl.robot.external import load_robot_by_name
 

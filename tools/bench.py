@@ -35,7 +35,8 @@ import torch  # noqa: E402
 from pathrl import native  # noqa: E402
 from pathrl.deploy.fuzz import fuzz_follower  # noqa: E402
 from pathrl.envs.rewards import build_reward_terms  # noqa: E402
-from pathrl.envs.tracking import PathTrackingEnv, TrackingEnvCfg  # noqa: E402
+from pathrl.envs.tracking import PathTrackingEnv  # noqa: E402
+from pathrl.envs.tracking_cfg import TrackingEnvCfg
 from pathrl.eval.limit_fuzz import fuzz_env, fuzz_report  # noqa: E402
 from pathrl.limits.backend import LimitBackend, current  # noqa: E402
 from pathrl.paths.pathset import build_pathset  # noqa: E402

@@ -58,18 +58,15 @@ from torch import Tensor
 
 from pathrl import native
 from pathrl.envs import terminations as terms
-from pathrl.envs.observations import (  # observe_state, tcp_observation: moved, re-exported
+from pathrl.envs.observations import (
     active_terms,
     assemble,
     observation_layout,
-    observe_state,
     tcp_distance,
-    tcp_observation,
     tracking_state,
 )
 from pathrl.envs.rewards import ENV_VALUES, TASK_VALUES, RewardTerm, StepQuantities
-from pathrl.envs.terminations import TERMINATION_REASONS  # noqa: F401 (moved)
-from pathrl.envs.tracking_cfg import FREE_JOINT_ACTIONS, TrackingEnvCfg  # noqa: F401 (moved)
+from pathrl.envs.tracking_cfg import TrackingEnvCfg
 from pathrl.limits.backend import current, env_scoped
 from pathrl.limits.braking import braking_within
 from pathrl.limits.feasible import (
@@ -93,8 +90,7 @@ except ImportError:  # pragma: no cover
     _VecEnvBase = object
 
 
-__all__ = ["FREE_JOINT_ACTIONS", "TERMINATION_REASONS", "PathTrackingEnv", "TrackingEnvCfg", "advance",
-           "observe_state", "tcp_observation"]
+__all__ = ["PathTrackingEnv", "advance"]
 
 
 @kernel(static=True)

@@ -29,7 +29,8 @@ from torch import Tensor
 
 from pathrl.dataset.io import load_pathset
 from pathrl.envs.rewards import build_reward_terms
-from pathrl.envs.tracking import PathTrackingEnv, TrackingEnvCfg
+from pathrl.envs.tracking import PathTrackingEnv
+from pathrl.envs.tracking_cfg import TrackingEnvCfg
 from pathrl.limits.check import KINDS, limit_violations
 from pathrl.limits.integrate import interpolate_step
 from pathrl.paths.knots import KnotStrategy

@@ -23,7 +23,8 @@ import torch
 from pathrl import native
 from pathrl.dataset.io import load_pathset
 from pathrl.envs.rewards import build_reward_terms
-from pathrl.envs.tracking import PathTrackingEnv, TrackingEnvCfg
+from pathrl.envs.tracking import PathTrackingEnv
+from pathrl.envs.tracking_cfg import TrackingEnvCfg
 from pathrl.limits.backend import current
 from pathrl.limits.integrate import interpolate_step
 from pathrl.paths.knots import KnotStrategy

@@ -240,7 +240,7 @@ class PathRLDistillationRunner(PathRLRunner, DistillationRunner):
 
 def check_run_cfg(cfg: dict[str, Any]) -> None:
     """Refuse run-level values that would run but give a wrong result (one-line ValueError naming the key); the
-    env's own values are checked by :class:`pathrl.envs.tracking.TrackingEnvCfg`; unknown keys are refused."""
+    env's own values are checked by :class:`pathrl.envs.tracking_cfg.TrackingEnvCfg`; unknown keys are refused."""
     from pathrl.config.agent import check_agent
     from pathrl.config.validate import check_keys
     from pathrl.schema import TrainAppCfg
