@@ -114,7 +114,7 @@ def _probe(env: dict) -> subprocess.CompletedProcess:
             "from pathrl import native\n"
             "from pathrl.limits import feasible\n"
             "from pathrl.limits.feasible import JointLimits\n"
-            "from pathrl.robot.model import load_robot_by_name\n"
+            "from pathrl.robot.external import load_robot_by_name\n"
             "lim = JointLimits.from_robot(load_robot_by_name('iiwa7'))\n"
             "p = torch.zeros(2, 7, dtype=torch.float64)\n"
             "lo, hi = feasible.valid_acceleration_range(p, p, p, lim, 0.1)\n"
