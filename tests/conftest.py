@@ -24,7 +24,7 @@ def tiny_trueadapt(tmp_path_factory):
     from omegaconf import OmegaConf
 
     from pathrl.config.paths import CONF_DIR
-    from pathrl.dataset.generate import generate_dataset
+    from pathrl.datagen.generate import generate_dataset
 
     robot = OmegaConf.to_container(OmegaConf.load(CONF_DIR / "robot" / "iiwa7.yaml"), resolve=True)
     ds = OmegaConf.load(CONF_DIR / "dataset" / "trueadapt_on_plate.yaml")

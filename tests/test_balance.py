@@ -20,8 +20,8 @@ from pathrl.baselines.balance import (
     urdf_joint_axes,
 )
 from pathrl.baselines.com import StaticCom
-from pathrl.baselines.controllers import make_controller
-from pathrl.robot.model import load_robot_by_name
+from pathrl.robot.external import load_robot_by_name
+from pathrl.runs import make_controller
 
 
 @pytest.fixture(scope="module")

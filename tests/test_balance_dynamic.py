@@ -12,8 +12,8 @@ import torch
 from pathrl.baselines.balance import BalanceCfg, BalanceController, urdf_joint_axes
 from pathrl.baselines.com import StaticCom
 from pathrl.limits.feasible import acceleration_to_action
+from pathrl.robot.external import load_robot_by_name
 from pathrl.robot.kinematics import ForwardKinematics
-from pathrl.robot.model import load_robot_by_name
 
 G = 9.81
 H_ANKLE = BalanceCfg().ankle_height

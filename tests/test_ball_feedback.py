@@ -16,20 +16,21 @@ from pathrl.baselines.ball_feedback import (
     quintic_coefficients,
     tray_normal,
 )
-from pathrl.baselines.controllers import make_controller
 from pathrl.baselines.tracking import linear_action
 from pathrl.baselines.tray_time_law import TimeLawCfg, TimeLawTable, build_time_laws, tray_time_law
 from pathrl.dataset.io import load_pathset
-from pathrl.envs.feedback import GRAVITY, ROLL_FACTOR, AnalyticBall, FrozenSensor, plate_pose
 from pathrl.envs.rewards import build_reward_terms
-from pathrl.envs.tracking import PathTrackingEnv, TrackingEnvCfg
+from pathrl.envs.tracking import PathTrackingEnv
+from pathrl.envs.tracking_cfg import TrackingEnvCfg
 from pathrl.eval.rollout import rollout
 from pathrl.limits.check import limit_violations
 from pathrl.limits.feasible import JointLimits, action_to_acceleration
 from pathrl.paths.knots import KnotStrategy
 from pathrl.paths.segments import full_segments
+from pathrl.robot.external import load_robot_by_name
 from pathrl.robot.kinematics import ForwardKinematics
-from pathrl.robot.model import load_robot_by_name
+from pathrl.runs import make_controller
+from pathrl.sim.feedback import GRAVITY, ROLL_FACTOR, AnalyticBall, FrozenSensor, plate_pose
 
 ROOT = Path(__file__).resolve().parents[1]
 DATASET = ROOT / "datasets" / "iiwa7" / "ball_balancing"

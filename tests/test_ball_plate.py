@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pathrl.robot.model import load_robot_by_name
+from pathrl.robot.external import load_robot_by_name
 from pathrl.sim.ball_plate import PLATE_SIZE, USABLE_HALF, BallOnPlateScene, BallParams, plate_urdf, sample_ball
 
 LEVEL = np.array([0.0, 0.5, 0.0, -1.0, 0.0, -1.5, 0.0])  # q6 = q4 - q2: plate level, face up

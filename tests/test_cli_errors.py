@@ -20,7 +20,7 @@ from pathrl.cli import export as export_cli
 from pathrl.cli import toppra as toppra_cli
 from pathrl.dataset.io import save_dataset
 from pathrl.dataset.synthetic import smooth_paths
-from pathrl.robot.model import load_robot_by_name
+from pathrl.robot.external import load_robot_by_name
 
 #: (overrides, separated by spaces; expected text in the one line)
 TRAIN_CASES = {

@@ -74,7 +74,7 @@ def test_hydra_quoting_and_option_lists():
 
     assert hydra_safe(["dataset.path=/data/tëst run", "rows=[\"Typ ä\"]", "reward=a,b", "-m", "seed=1"]) == [
         "dataset.path='/data/tëst run'", "rows=[\"Typ ä\"]", "reward=a,b", "-m", "seed=1"]
-    from pathrl.config.schema import ToppraAppCfg
+    from pathrl.schema import ToppraAppCfg
 
     assert compose("toppra_app", ["dataset.path=/tmp/dätä"], ToppraAppCfg).dataset.path == "/tmp/dätä"
 

@@ -9,7 +9,7 @@ import pybullet as p
 import pytest
 
 from pathrl.robot.collision import CollisionChecker
-from pathrl.robot.model import load_robot_by_name
+from pathrl.robot.external import load_robot_by_name
 
 UPRIGHT = [0.0] * 7
 FOLDED_INTO_BASE = [0.0, 2.0, 0.0, -2.05, 0.0, 0.0, 0.0]  # elbow up, forearm folded back into link_0

@@ -7,11 +7,14 @@ import pytest
 import torch
 from omegaconf import OmegaConf
 
-from pathrl.dataset.generate import ball_constraint_violation, generate_dataset, resolve_params
+from pathrl.config.paths import CONF_DIR
+from pathrl.datagen.generate import generate_dataset
+from pathrl.datagen.generators.ball_balancing import ball_constraint_violation
+from pathrl.datagen.generators.defaults import resolve_params
 from pathrl.dataset.io import DatasetError, load_dataset, load_pathset
 from pathrl.paths.knots import KnotStrategy
 from pathrl.paths.spline import sample_uniform
-from pathrl.robot.model import CONF_DIR, load_robot_by_name
+from pathrl.robot.external import load_robot_by_name
 
 torch.set_num_threads(1)
 
@@ -112,7 +115,7 @@ def test_params_validation():
 
 @pytest.mark.parametrize("kind", ["random", "target_point", "ball_balancing"])
 def test_conf_params_match_code_defaults(kind):
-    from pathrl.dataset.generate import DEFAULT_PARAMS
+    from pathrl.datagen.generators.defaults import DEFAULT_PARAMS
 
     cfg = OmegaConf.to_container(OmegaConf.load(CONF_DIR / "dataset" / f"{kind}.yaml"))
     assert cfg["params"] == DEFAULT_PARAMS[kind]

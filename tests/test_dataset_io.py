@@ -18,7 +18,7 @@ from pathrl.dataset.io import (
 )
 from pathrl.dataset.stats import dataset_stats
 from pathrl.paths.knots import KnotStrategy
-from pathrl.robot.model import load_robot_by_name
+from pathrl.robot.external import load_robot_by_name
 
 
 def _paths(rng, n, m=7, prefix="p"):
@@ -192,7 +192,7 @@ def test_paths_leaving_the_position_limits_are_refused_or_clipped(tmp_path, caps
     from pathrl.dataset.limits import limit_excess
     from pathrl.dataset.synthetic import smooth_paths
     from pathrl.paths.knots import KnotStrategy
-    from pathrl.robot.model import load_robot_by_name
+    from pathrl.robot.external import load_robot_by_name
 
     robot = load_robot_by_name("iiwa7")
     paths = smooth_paths(robot, 3, 0)

@@ -12,7 +12,7 @@ from scipy.interpolate import make_interp_spline
 from pathrl.dataset.io import DatasetError, load_dataset, load_pathset
 from pathrl.dataset.kiemel import import_kiemel
 from pathrl.paths.knots import KnotStrategy
-from pathrl.robot.model import load_robot_by_name
+from pathrl.robot.external import load_robot_by_name
 
 
 def episode_dict(knots: np.ndarray) -> dict:

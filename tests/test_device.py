@@ -74,8 +74,8 @@ def test_pybullet_tasks_train_on_the_cpu_only(task):
 
 
 def test_pybullet_feedback_is_refused_off_the_cpu_before_any_scene_is_built():
-    from pathrl.envs.factory import make_feedback
-    from pathrl.robot.model import load_robot_by_name
+    from pathrl.envs.registry import make_feedback
+    from pathrl.robot.external import load_robot_by_name
 
     cfg = {"task": BALL, "env": {"control_rate": 240.0}, "device": "cpu"}
     with pytest.raises(DeviceError, match="PyBullet"):

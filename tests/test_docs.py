@@ -161,7 +161,7 @@ def _sweep_jobs(overrides: list[str]) -> list[list[str]]:
 def check_train(args: list[str], capsys) -> None:
     from pathrl.cli import train
     from pathrl.cli.common import compose
-    from pathrl.config.schema import TrainAppCfg
+    from pathrl.schema import TrainAppCfg
 
     concrete, deferred = _split_placeholders(args)
     if "-m" in concrete or "--multirun" in concrete:
@@ -186,13 +186,13 @@ def check_toppra(args: list[str], monkeypatch) -> None:
 
 
 def check_dataset(args: list[str], monkeypatch) -> None:
-    import pathrl.dataset.generate
+    import pathrl.datagen.generate
     import pathrl.dataset.io
     import pathrl.dataset.kiemel
     import pathrl.dataset.waypoints
     from pathrl.cli import dataset
 
-    monkeypatch.setattr(pathrl.dataset.generate, "generate_dataset", _stop)
+    monkeypatch.setattr(pathrl.datagen.generate, "generate_dataset", _stop)
     monkeypatch.setattr(pathrl.dataset.kiemel, "import_kiemel", _stop)
     monkeypatch.setattr(pathrl.dataset.waypoints, "import_waypoints", _stop)
     monkeypatch.setattr(pathrl.dataset.io, "load_dataset", _stop)

@@ -5,14 +5,16 @@ import pytest
 import torch
 from tensordict import TensorDict
 
+from pathrl.envs.observations import tcp_observation
 from pathrl.envs.reference import ReferencePath, ReferenceTrackingEnv
 from pathrl.envs.rewards import StepQuantities, build_reward_terms, path_length, tcp_deviation
-from pathrl.envs.tracking import PathTrackingEnv, TrackingEnvCfg, tcp_observation
+from pathrl.envs.tracking import PathTrackingEnv
+from pathrl.envs.tracking_cfg import TrackingEnvCfg
 from pathrl.limits.braking import braking_acceleration
 from pathrl.limits.feasible import JointLimits
 from pathrl.paths.pathset import build_pathset
 from pathrl.paths.segments import Segments
-from pathrl.robot.model import load_robot_by_name
+from pathrl.robot.external import load_robot_by_name
 
 REWARD = {"path_length": {"weight": 2.0}, "deviation_max": {"weight": 0.9}, "deviation_mean": {"weight": 0.9},
           "action_saturation": {"weight": 0.4}}

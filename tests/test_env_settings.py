@@ -12,8 +12,8 @@ import yaml
 
 from pathrl.cli.common import UserError, compose, to_container
 from pathrl.config.migrate import ADDED_IN_V2, ADDED_KEYS, CONFIG_VERSION, NO_TASK, config_version, migrate
-from pathrl.config.schema import TrainAppCfg
 from pathrl.envs.tracking_cfg import EnvSettings, TrackingEnvCfg
+from pathrl.schema import TrainAppCfg
 
 ROOT = Path(__file__).resolve().parents[1]
 ENV_YAMLS = sorted((ROOT / "pathrl" / "conf" / "env").glob("*.yaml"))

@@ -20,8 +20,8 @@ from pathrl.eval.metrics import (
     sample_deviations,
 )
 from pathrl.paths.pathset import build_pathset
+from pathrl.robot.external import load_robot_by_name
 from pathrl.robot.kinematics import ForwardKinematics
-from pathrl.robot.model import load_robot_by_name
 
 NAMES = ("a", "b", "c")
 

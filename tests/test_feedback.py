@@ -12,11 +12,12 @@ import torch
 from tensordict import TensorDict
 
 from pathrl.dataset.io import load_pathset
-from pathrl.envs.feedback import RES_FACTOR, ROLL_FACTOR, AnalyticBall, rolling_resistance
 from pathrl.envs.rewards import build_reward_terms
-from pathrl.envs.tracking import PathTrackingEnv, TrackingEnvCfg
+from pathrl.envs.tracking import PathTrackingEnv
+from pathrl.envs.tracking_cfg import TrackingEnvCfg
 from pathrl.paths.knots import KnotStrategy
-from pathrl.robot.model import load_robot_by_name
+from pathrl.robot.external import load_robot_by_name
+from pathrl.sim.feedback import RES_FACTOR, ROLL_FACTOR, AnalyticBall, rolling_resistance
 from pathrl.train.warm_start import WarmStartError, widen_inputs
 
 LEVEL = torch.tensor([0.0, 0.5, 0.0, -1.0, 0.0, -1.5, 0.0], dtype=torch.float64)  # plate level, face up
@@ -217,7 +218,7 @@ def test_standing_pool_reads_an_upright_robot():
 
 
 def test_standing_task_refuses_other_robots(iiwa):
-    from pathrl.envs.factory import make_feedback
+    from pathrl.envs.registry import make_feedback
 
     cfg = {"task": {"feedback": "standing", "backend": "pybullet"}, "env": {"control_rate": 240.0}}
     with pytest.raises(ValueError, match="ARMAR-4"):
@@ -283,7 +284,7 @@ class _SlidingPlate:
 def test_plate_imu_by_hand(iiwa):
     """Level plate accelerating at 2 m/s^2 along world x: in-plane specific force -2/g along x (rotated into
     the plate frame), no tilt; a plate tilted by 5 deg at rest reads sin(5 deg) twice."""
-    from pathrl.envs.feedback import PlateIMU
+    from pathrl.sim.feedback import PlateIMU
 
     imu = PlateIMU(iiwa, 2, 240.0, fk=_SlidingPlate())
     t = torch.arange(24, dtype=torch.float64) / 240.0
@@ -329,7 +330,7 @@ def test_plate_drive_by_hand(iiwa):
     """The drive is the in-plane specific force (g): 0 for a level plate at rest or sliding at constant
     velocity, a/g for a level plate accelerating at a, sin(tilt) for a tilted plate at rest, and 0 again
     for a plate tilted into its acceleration by atan(a/g) (the waiter's tray)."""
-    from pathrl.envs.feedback import PlateDrive
+    from pathrl.sim.feedback import PlateDrive
 
     g, a = 9.81, 2.0
     t = torch.arange(1, 25, dtype=torch.float64) / 240.0
@@ -360,7 +361,7 @@ def test_plate_drive_by_hand(iiwa):
 
 def test_waiter_tray_does_not_drive_the_ball():
     """A plate tilted by atan(a/g) into a horizontal acceleration a feels no in-plane force."""
-    from pathrl.envs.feedback import inplane_force
+    from pathrl.sim.feedback import inplane_force
 
     a, g, h = 3.0, 9.81, 1.0 / 40.0
     tilt = math.atan(a / g)

@@ -15,7 +15,8 @@ from hypothesis import strategies as st
 from pathrl.dataset.io import DatasetError, load_pathset, save_dataset
 from pathrl.deploy import Follower, FollowerError
 from pathrl.envs.rewards import build_reward_terms
-from pathrl.envs.tracking import PathTrackingEnv, TrackingEnvCfg
+from pathrl.envs.tracking import PathTrackingEnv
+from pathrl.envs.tracking_cfg import TrackingEnvCfg
 from pathrl.limits.check import limit_violations
 from pathrl.limits.feasible import JointLimits
 from pathrl.limits.integrate import interpolate_step

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pathrl.robot.model import load_robot_by_name
+from pathrl.robot.external import load_robot_by_name
 from pathrl.sim.humanoid import StandingScene
 
 

@@ -10,8 +10,8 @@ import pybullet as p
 import pytest
 import torch
 
+from pathrl.robot.external import load_robot_by_name
 from pathrl.robot.kinematics import ForwardKinematics, matrix_to_quat, quat_angle_deg
-from pathrl.robot.model import load_robot_by_name
 
 ROBOTS = ["iiwa7", "armar6", "armar4", "armar4_legs"]
 

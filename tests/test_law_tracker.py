@@ -9,20 +9,21 @@ import numpy as np
 import pytest
 import torch
 
-from pathrl.baselines.controllers import make_controller
 from pathrl.baselines.law_tracker import LawTracker, LawTrackerCfg
 from pathrl.baselines.toppra import solve_plan
 from pathrl.dataset.io import load_pathset
 from pathrl.envs.rewards import build_reward_terms
-from pathrl.envs.tracking import PathTrackingEnv, TrackingEnvCfg
+from pathrl.envs.tracking import PathTrackingEnv
+from pathrl.envs.tracking_cfg import TrackingEnvCfg
 from pathrl.eval.metrics import matched_samples, sample_deviations
 from pathrl.eval.rollout import rollout
 from pathrl.limits.check import limit_violations
 from pathrl.limits.feasible import JointLimits
 from pathrl.paths.knots import KnotStrategy
 from pathrl.paths.segments import full_segments, sample_segments
+from pathrl.robot.external import load_robot_by_name
 from pathrl.robot.kinematics import ForwardKinematics
-from pathrl.robot.model import load_robot_by_name
+from pathrl.runs import make_controller
 
 ROOT = Path(__file__).resolve().parents[1]
 DATASET = ROOT / "datasets" / "iiwa7" / "ball_balancing"

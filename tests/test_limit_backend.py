@@ -14,7 +14,7 @@ from test_env import make_env
 
 from pathrl import native
 from pathrl.config.migrate import ADDED_KEYS, migrate
-from pathrl.envs.tracking import TrackingEnvCfg
+from pathrl.envs.tracking_cfg import TrackingEnvCfg
 from pathrl.envs.trueadapt import AdaptEnvCfg
 from pathrl.limits import kernels
 from pathrl.limits.backend import DEFAULT, LimitBackend, current
@@ -133,7 +133,7 @@ def test_bad_values_give_a_one_line_error(make, match):
 
 def test_run_config_chooses_the_backend_and_old_runs_keep_theirs():
     from pathrl.cli.common import compose, to_container
-    from pathrl.config.schema import TrainAppCfg
+    from pathrl.schema import TrainAppCfg
 
     cfg = to_container(compose("train", [], TrainAppCfg))
     assert LimitBackend.from_run(cfg) == LimitBackend(native=True, compiled=True)  # pathrl-train's defaults

@@ -5,7 +5,7 @@ import torch
 
 import pathrl.envs.tracking as tracking
 from pathrl.eval.limit_fuzz import fuzz_env
-from pathrl.robot.model import load_robot_by_name
+from pathrl.robot.external import load_robot_by_name
 
 
 @pytest.mark.parametrize("robot", ["iiwa7", "armar6", "armar4_legs"])

@@ -31,7 +31,7 @@ from pathrl.limits.braking import braking_acceleration, braking_steps_bound, bra
 from pathrl.limits.check import limit_violations
 from pathrl.limits.feasible import JointLimits, acceleration_to_action, action_to_acceleration, valid_acceleration_range
 from pathrl.limits.integrate import end_of_step, interpolate_step
-from pathrl.robot.model import load_robot_by_name
+from pathrl.robot.external import load_robot_by_name
 
 ROBOTS = ("iiwa7", "armar6", "armar4", "armar4_legs")
 DT = 0.1

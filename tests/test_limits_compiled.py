@@ -104,7 +104,7 @@ def test_compiled_env_observation_equals_eager(compiled_kernels, relative: bool,
     """The env's observation kernel (static shapes) gives the eager state, window ends included."""
     import numpy as np
 
-    from pathrl.envs.tracking import observe_state
+    from pathrl.envs.observations import observe_state
     from pathrl.paths.pathset import build_pathset
 
     rng = np.random.default_rng(1)

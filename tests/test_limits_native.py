@@ -114,7 +114,7 @@ def _probe(env: dict) -> subprocess.CompletedProcess:
             "from pathrl import native\n"
             "from pathrl.limits import feasible\n"
             "from pathrl.limits.feasible import JointLimits\n"
-            "from pathrl.robot.model import load_robot_by_name\n"
+            "from pathrl.robot.external import load_robot_by_name\n"
             "lim = JointLimits.from_robot(load_robot_by_name('iiwa7'))\n"
             "p = torch.zeros(2, 7, dtype=torch.float64)\n"
             "lo, hi = feasible.valid_acceleration_range(p, p, p, lim, 0.1)\n"
@@ -177,9 +177,10 @@ def test_env_with_more_substeps_than_the_native_step_takes_uses_torch(tiny_datas
     """substeps > 64 is a valid config: the env steps with the torch kernel instead of failing."""
     from pathrl.dataset.io import load_pathset
     from pathrl.envs.rewards import build_reward_terms
-    from pathrl.envs.tracking import PathTrackingEnv, TrackingEnvCfg
+    from pathrl.envs.tracking import PathTrackingEnv
+    from pathrl.envs.tracking_cfg import TrackingEnvCfg
     from pathrl.paths.knots import KnotStrategy
-    from pathrl.robot.model import load_robot_by_name
+    from pathrl.robot.external import load_robot_by_name
 
     robot = load_robot_by_name("iiwa7")
     paths = load_pathset(tiny_dataset, "train", KnotStrategy("distance", 0.3), robot=robot)

@@ -27,7 +27,7 @@ from pathrl.limits.braking import braking_acceleration, braking_steps_bound, is_
 from pathrl.limits.check import limit_violations
 from pathrl.limits.feasible import JointLimits, action_to_acceleration, valid_acceleration_range
 from pathrl.limits.integrate import end_of_step, interpolate_step
-from pathrl.robot.model import load_robot_by_name
+from pathrl.robot.external import load_robot_by_name
 
 DT, SUB, STEPS, RTOL = 0.1, 24, 200, 1e-7
 ROBOTS = ("iiwa7", "armar6", "armar4", "armar4_legs")

@@ -10,7 +10,6 @@ from test_env import make_env as make_tracking_env
 from test_env import smooth_paths
 
 from pathrl.cli.common import compose, to_container
-from pathrl.config.schema import TrainAppCfg
 from pathrl.envs.observations import (
     OBS_ORDER,
     OBS_TERMS,
@@ -23,6 +22,7 @@ from pathrl.envs.observations import (
 from pathrl.envs.registry import EVAL_ENV, TASKS, make_env
 from pathrl.paths.pathset import build_pathset
 from pathrl.robot.model import load_robot
+from pathrl.schema import TrainAppCfg
 
 #: A small env of each registered task and config variant: (task, config overrides, dataset fixture or None:
 #: synthetic paths of the config's robot).

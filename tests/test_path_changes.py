@@ -13,7 +13,6 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from pathrl.cli.common import compose, to_container
-from pathrl.config.schema import TrainAppCfg
 from pathrl.dataset.io import load_dataset
 from pathrl.envs.path_change_cfg import PathChangeCfg
 from pathrl.envs.path_changes import PathChanges, with_path_changes
@@ -27,6 +26,7 @@ from pathrl.paths.knots import KnotStrategy
 from pathrl.paths.pathset import build_pathset
 from pathrl.paths.spline import dedupe_knots
 from pathrl.robot.model import load_robot
+from pathrl.schema import TrainAppCfg
 
 ROOT = Path(__file__).resolve().parents[1]
 DATASET = ROOT / "datasets" / "iiwa7" / "random"

@@ -62,7 +62,7 @@ MODULES = _checked_modules()
 def test_every_package_is_checked():
     packages = {rel.split("/")[0] for rel in MODULES if "/" in rel}
     expected = {p.name for p in ROOT.iterdir() if (p / "__init__.py").is_file()}
-    assert packages == expected and "dataset/generators/paths.py" in MODULES and len(MODULES) >= 130
+    assert packages == expected and "datagen/generators/paths.py" in MODULES and len(MODULES) >= 130
 
 
 def test_all_names_exist_and_cover_public_definitions():

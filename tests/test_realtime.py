@@ -5,7 +5,7 @@ from pathlib import Path
 import pytest
 
 from pathrl.eval.realtime import main, realtime_ratios
-from pathrl.robot.model import load_robot_by_name
+from pathrl.robot.external import load_robot_by_name
 
 DATA = Path(__file__).resolve().parents[1] / "datasets"
 

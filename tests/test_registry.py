@@ -10,13 +10,12 @@ import torch
 import yaml
 
 from pathrl.cli.common import CONF_DIR, compose, to_container
-from pathrl.config.schema import TrainAppCfg
 from pathrl.dataset.io import load_pathset
-from pathrl.envs.factory import task_cfg
-from pathrl.envs.registry import EVAL_ENV, TASKS, check_task, get_task, make_env
+from pathrl.envs.registry import EVAL_ENV, TASKS, check_task, get_task, make_env, task_cfg
 from pathrl.envs.terminations import TerminationReason
 from pathrl.paths.knots import KnotStrategy
 from pathrl.robot.model import load_robot
+from pathrl.schema import TrainAppCfg
 
 ROOT = Path(__file__).resolve().parents[1]
 EXPERIMENTS = sorted(p.stem for p in (CONF_DIR / "experiment").glob("*.yaml"))

@@ -98,7 +98,7 @@ def test_rows_cover_the_paper_and_name_shipped_models():
 @pytest.mark.parametrize("task", ["on_plate", "in_place"])
 def test_committed_split_holds_the_1000_test_trajectories(task):
     from pathrl.dataset.trueadapt import load_trajectories
-    from pathrl.robot.model import load_robot_by_name
+    from pathrl.robot.external import load_robot_by_name
 
     path = ROOT / "datasets" / "iiwa7" / f"trueadapt_{task}"
     meta = json.loads((path / "dataset.json").read_text())
@@ -108,7 +108,7 @@ def test_committed_split_holds_the_1000_test_trajectories(task):
 
 
 def test_a_fresh_checkout_evaluates_on_the_committed_split(tmp_path, monkeypatch):
-    from pathrl.eval.evaluate import committed_split
+    from pathrl.runs import committed_split
 
     (tmp_path / "datasets").symlink_to(ROOT / "datasets")
     monkeypatch.chdir(tmp_path)  # no data/ here
@@ -124,7 +124,7 @@ def test_limit_counter_checks_every_setpoint_and_finds_violations():
     from pathrl.envs.trueadapt_rewards import build_adapt_reward
     from pathrl.eval.trueadapt import evaluate, reference_policy
     from pathrl.eval.trueadapt_limits import LimitCounter
-    from pathrl.robot.model import load_robot_by_name
+    from pathrl.robot.external import load_robot_by_name
 
     robot = load_robot_by_name("iiwa7")
     bank = load_trajectories(str(ROOT / "datasets/iiwa7/trueadapt_on_plate"), "test", robot, 0.05)

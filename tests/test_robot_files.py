@@ -13,8 +13,14 @@ import numpy as np
 import pytest
 
 from pathrl.cli.robot import main as robot_main
-from pathrl.robot.external import JERK_PER_ACCELERATION, ROBOT_PATH_ENV, expand_robot_file, robot_files
-from pathrl.robot.model import RobotConfigError, load_robot_by_name
+from pathrl.robot.external import (
+    JERK_PER_ACCELERATION,
+    ROBOT_PATH_ENV,
+    expand_robot_file,
+    load_robot_by_name,
+    robot_files,
+)
+from pathrl.robot.model import RobotConfigError
 
 ROOT = Path(__file__).resolve().parents[1]
 ROBOTS = ROOT / "examples" / "robots"

@@ -53,8 +53,8 @@ def test_terms():
 
 def test_env_sets_one_reason_per_env_and_logs_their_shares(tiny_dataset):
     from pathrl.cli.common import compose, to_container
-    from pathrl.config.schema import TrainAppCfg
     from pathrl.envs.registry import make_env
+    from pathrl.schema import TrainAppCfg
 
     cfg = to_container(compose("train", [f"dataset.path={tiny_dataset}", "env.max_deviation=1e-6"], TrainAppCfg))
     env = make_env(cfg, "train", num_envs=8, seed=3)

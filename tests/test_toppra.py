@@ -12,7 +12,7 @@ from pathrl.baselines.toppra import MARGIN, solve_plan, solve_segment
 from pathrl.paths.pathset import build_pathset
 from pathrl.paths.segments import evaluation_plan
 from pathrl.paths.spline import arc_length_table, fit_spline, knot_arc_lengths
-from pathrl.robot.model import load_robot_by_name
+from pathrl.robot.external import load_robot_by_name
 
 VEL = np.array([1.0, 2.0, 1.5])
 ACC = np.array([4.0, 3.0, 10.0])

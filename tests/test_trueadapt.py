@@ -15,8 +15,9 @@ from hypothesis import strategies as st
 from omegaconf import OmegaConf
 
 from pathrl.cli.common import CONF_DIR
+from pathrl.datagen.trueadapt import mirror_variants
 from pathrl.dataset.io import DatasetError
-from pathrl.dataset.trueadapt import bank_from_arrays, load_trajectories, mirror_variants
+from pathrl.dataset.trueadapt import bank_from_arrays, load_trajectories
 from pathrl.envs.terminations import TerminationReason
 from pathrl.envs.trueadapt import AdaptEnvCfg, TrueAdaptEnv, clip_to_range
 from pathrl.envs.trueadapt_rewards import (
@@ -29,7 +30,7 @@ from pathrl.envs.trueadapt_rewards import (
     on_plate,
 )
 from pathrl.limits.check import limit_violations
-from pathrl.robot.model import load_robot_by_name
+from pathrl.robot.external import load_robot_by_name
 
 ROBOT = load_robot_by_name("iiwa7")
 TERMS = OmegaConf.to_container(OmegaConf.load(CONF_DIR / "reward" / "trueadapt_on_plate.yaml"))["terms"]
@@ -322,7 +323,7 @@ def test_trajectories_load_and_info_prints_their_statistics(tiny_trueadapt, tiny
 # ------------------------------------------------------------------------------------------------ training
 def test_two_iteration_training_run(tiny_trueadapt, tmp_path):
     from pathrl.cli.common import compose, to_container
-    from pathrl.config.schema import TrainAppCfg
+    from pathrl.schema import TrainAppCfg
     from pathrl.train.runner import train
 
     run_dir = tmp_path / "run"
@@ -337,9 +338,9 @@ def test_two_iteration_training_run(tiny_trueadapt, tmp_path):
 def test_the_pybullet_ball_runs_the_same_env(tiny_trueadapt):
     """task.backend=pybullet (evaluation): the PyBullet scene replaces the analytic ball behind the same env."""
     from pathrl.cli.common import compose, to_container
-    from pathrl.config.schema import TrainAppCfg
     from pathrl.envs.trueadapt import build_trueadapt_env
     from pathrl.eval.trueadapt import evaluate, reference_policy
+    from pathrl.schema import TrainAppCfg
 
     cfg = to_container(compose("train", ["+experiment=iiwa7_trueadapt_in_place", f"dataset.path={tiny_trueadapt.path}",
                                          "task.backend=pybullet", "task.workers=1"], TrainAppCfg))

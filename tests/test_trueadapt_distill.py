@@ -9,8 +9,8 @@ import pytest
 import torch
 
 from pathrl.cli.common import compose, to_container
-from pathrl.config.schema import TrainAppCfg
 from pathrl.logging.mcap_io import read_messages
+from pathrl.schema import TrainAppCfg
 
 
 def _cfg(experiment: str, dataset: Path, run_dir: Path, iterations: int) -> dict:
@@ -30,8 +30,8 @@ def test_distillation_configs_compose_with_the_tray_teacher(task, tiny_trueadapt
 def test_tiny_distillation_lowers_the_loss_and_the_student_acts_on_the_policy_observation(tiny_trueadapt,
                                                                                            tmp_path):
     from pathrl.envs.trueadapt import build_trueadapt_env
-    from pathrl.eval.evaluate import load_policy, load_run
     from pathrl.eval.trueadapt import evaluate
+    from pathrl.runs import load_policy, load_run
     from pathrl.train.runner import train
 
     run_dir = tmp_path / "distill"
@@ -58,8 +58,8 @@ def test_recurrent_student_trains_loads_and_starts_each_batch_with_a_clear_memor
     from rsl_rl.models import RNNModel
 
     from pathrl.envs.trueadapt import build_trueadapt_env
-    from pathrl.eval.evaluate import load_policy, load_run
     from pathrl.eval.trueadapt import ObservingPolicy, run_trajectories
+    from pathrl.runs import load_policy, load_run
     from pathrl.train.runner import train
 
     run_dir = tmp_path / "gru"

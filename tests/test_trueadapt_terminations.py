@@ -14,7 +14,7 @@ from pathrl.envs.terminations import ADAPT_ENDINGS, TerminationReason, first_rea
 from pathrl.envs.trueadapt import AdaptEnvCfg, TrueAdaptEnv, ball_lost
 from pathrl.envs.trueadapt_rewards import build_adapt_reward
 from pathrl.eval.trueadapt import run_trajectories
-from pathrl.robot.model import load_robot_by_name
+from pathrl.robot.external import load_robot_by_name
 
 R = TerminationReason
 ROBOT = load_robot_by_name("iiwa7")

@@ -12,7 +12,6 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from omegaconf import OmegaConf
 
-from pathrl.baselines.controllers import make_controller
 from pathrl.baselines.trueadapt_tray import (
     AdaptTrayCfg,
     AdaptTrayController,
@@ -22,11 +21,12 @@ from pathrl.baselines.trueadapt_tray import (
 )
 from pathrl.cli.common import CONF_DIR
 from pathrl.dataset.trueadapt import bank_from_arrays
-from pathrl.envs.feedback import GRAVITY, plate_pose
 from pathrl.envs.trueadapt import AdaptEnvCfg, TrueAdaptEnv
 from pathrl.envs.trueadapt_rewards import build_adapt_reward
 from pathrl.limits.check import limit_violations
-from pathrl.robot.model import load_robot_by_name
+from pathrl.robot.external import load_robot_by_name
+from pathrl.runs import make_controller
+from pathrl.sim.feedback import GRAVITY, plate_pose
 
 ROBOT = load_robot_by_name("iiwa7")
 TERMS = OmegaConf.to_container(OmegaConf.load(CONF_DIR / "reward" / "trueadapt_on_plate.yaml"))["terms"]

@@ -11,18 +11,18 @@ import pytest
 import torch
 from omegaconf import OmegaConf
 
-from pathrl.baselines.controllers import make_controller
 from pathrl.cli.common import CONF_DIR
 from pathrl.cli.view import main as view_main
 from pathrl.dataset.trueadapt import bank_from_arrays
-from pathrl.envs.feedback import PLATE_SIZE, plate_pose
 from pathrl.envs.trueadapt import AdaptEnvCfg, TrueAdaptEnv
 from pathrl.envs.trueadapt_rewards import build_adapt_reward
 from pathrl.eval.trueadapt_record import record_trueadapt
 from pathrl.logging.mcap_io import read_messages
 from pathrl.logging.schema import TRUEADAPT_EPISODE, TRUEADAPT_ROBOT, TRUEADAPT_STEP
+from pathrl.robot.external import load_robot_by_name
 from pathrl.robot.kinematics import ForwardKinematics
-from pathrl.robot.model import load_robot_by_name
+from pathrl.runs import make_controller
+from pathrl.sim.feedback import PLATE_SIZE, plate_pose
 
 ROBOT = load_robot_by_name("iiwa7")
 TERMS = OmegaConf.to_container(OmegaConf.load(CONF_DIR / "reward" / "trueadapt_on_plate.yaml"))["terms"]
@@ -149,7 +149,7 @@ def test_the_tool_records_a_controller(tiny_dataset, tmp_path, capsys):
 def test_the_tool_records_a_trained_run(tiny_dataset, tmp_path, capsys):
     """--run loads the run's config (its dataset) and newest checkpoint, as tools/trueadapt_eval.py does."""
     from pathrl.cli.common import compose, to_container
-    from pathrl.config.schema import TrainAppCfg
+    from pathrl.schema import TrainAppCfg
     from pathrl.train.runner import train
 
     run = tmp_path / "run"

@@ -13,7 +13,7 @@ from pathrl.cli.dataset import main
 from pathrl.dataset.io import DatasetError, load_dataset, load_pathset
 from pathrl.dataset.waypoints import as_dataset, read_path_file
 from pathrl.paths.knots import KnotStrategy
-from pathrl.robot.model import load_robot_by_name
+from pathrl.robot.external import load_robot_by_name
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -1,4 +1,4 @@
-"""A policy trained on part of a robot, run on the whole robot (pathrl.policy.widen, eval.evaluate._onto_robot)."""
+"""A policy trained on part of a robot, run on the whole robot (pathrl.policy.widen, runs._onto_robot)."""
 
 from __future__ import annotations
 
@@ -9,8 +9,8 @@ import torch
 from rsl_rl.models import MLPModel
 from tensordict import TensorDict
 
-from pathrl.eval.evaluate import _onto_robot
 from pathrl.policy.widen import LayoutError, actor_for_joints, input_columns, joint_rows
+from pathrl.runs import _onto_robot
 
 
 def _actor(num_obs: int, num_actions: int) -> MLPModel:

@@ -22,16 +22,16 @@ import torch
 
 from pathrl.baselines.balance import BalanceCfg, lean_vector
 from pathrl.baselines.com import StaticCom
-from pathrl.baselines.controllers import make_controller
 from pathrl.dataset.io import load_pathset
 from pathrl.envs.registry import EVAL_ENV, make_env
 from pathrl.envs.tracking import PathTrackingEnv
-from pathrl.eval.evaluate import PYBULLET_ENVS, load_policy, load_run
+from pathrl.eval.evaluate import PYBULLET_ENVS
 from pathrl.eval.rollout import rollout
 from pathrl.paths.knots import KnotStrategy
 from pathrl.paths.segments import evaluation_plan
 from pathrl.robot.kinematics import ForwardKinematics
 from pathrl.robot.model import load_robot
+from pathrl.runs import load_policy, load_run, make_controller
 
 ANKLE_HEIGHT = BalanceCfg.ankle_height  # m, ankle joints above the floor (the ZMP lies on the floor)
 

@@ -22,10 +22,10 @@ import torch
 from torch import Tensor
 
 from pathrl.dataset.io import load_pathset
-from pathrl.envs.feedback import GRAVITY, AnalyticBall, plate_pose
 from pathrl.paths.knots import KnotStrategy
+from pathrl.robot.external import load_robot_by_name
 from pathrl.robot.kinematics import ForwardKinematics
-from pathrl.robot.model import load_robot_by_name
+from pathrl.sim.feedback import GRAVITY, AnalyticBall, plate_pose
 
 RATE = 240.0
 STEP = 24  # setpoints per 0.1 s decision step

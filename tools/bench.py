@@ -35,11 +35,13 @@ import torch  # noqa: E402
 from pathrl import native  # noqa: E402
 from pathrl.deploy.fuzz import fuzz_follower  # noqa: E402
 from pathrl.envs.rewards import build_reward_terms  # noqa: E402
-from pathrl.envs.tracking import PathTrackingEnv, TrackingEnvCfg  # noqa: E402
+from pathrl.envs.tracking import PathTrackingEnv  # noqa: E402
+from pathrl.envs.tracking_cfg import TrackingEnvCfg
 from pathrl.eval.limit_fuzz import fuzz_env, fuzz_report  # noqa: E402
 from pathrl.limits.backend import LimitBackend, current  # noqa: E402
 from pathrl.paths.pathset import build_pathset  # noqa: E402
-from pathrl.robot.model import RobotSpec, load_robot_by_name  # noqa: E402
+from pathrl.robot.external import load_robot_by_name
+from pathrl.robot.model import RobotSpec  # noqa: E402
 from pathrl.storage import write_json_atomic  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -313,7 +315,7 @@ def bench_follower_end(model: str, dataset: str, rate_hz: float = 240.0) -> dict
 def bench_ball_task(backend: str, num_envs: int, seconds: float, workers: int = 2) -> dict:
     """Env steps/s of the ball-on-plate task (tracking + ball feedback) with the analytic torch ball or PyBullet
     (one client per env, `workers` processes): the same MDP, so the ratio is the price of simulating physics."""
-    from pathrl.envs.feedback import AnalyticBall
+    from pathrl.sim.feedback import AnalyticBall
     from pathrl.sim.vec import PyBulletBall
 
     robot = load_robot_by_name("iiwa7")

@@ -40,7 +40,7 @@ def _load(root: Path, roots: list[Path]):
 def rate(bench, robot: str, steps: int, warmup: int = 30) -> float:
     """Env steps per CPU second of `bench.make_env(robot, 4096)` (compiled limit kernels) over `steps` steps after
     `warmup`."""
-    from pathrl.robot.model import load_robot_by_name
+    from pathrl.robot.external import load_robot_by_name
 
     spec = load_robot_by_name(robot)
     try:

@@ -53,7 +53,7 @@ def main() -> None:
 def trueadapt_stats(robot: str, trajs: list, dt: float) -> dict:
     """The TrueAdapt trajectory statistics (``trajectories`` in dataset.json) of a subset."""
     from pathrl.dataset.trueadapt import trajectory_stats
-    from pathrl.robot.model import load_robot_by_name
+    from pathrl.robot.external import load_robot_by_name
 
     return trajectory_stats(trajs, load_robot_by_name(robot), dt)
 

@@ -25,12 +25,12 @@ from pathlib import Path
 import torch
 
 from pathrl.cli.common import ArgParser, UserError, compose, output_dir, run_cli, to_container
-from pathrl.config.schema import TrainAppCfg
 from pathrl.envs.device import EVAL_DEVICE
 from pathrl.envs.trueadapt import build_trueadapt_env
-from pathrl.eval.evaluate import committed_split
 from pathrl.eval.trueadapt import ObservingPolicy, evaluate, reference_policy, summary
 from pathrl.eval.trueadapt_limits import LimitCounter
+from pathrl.runs import committed_split
+from pathrl.schema import TrainAppCfg
 
 
 def controller_spec(text: str) -> dict:
@@ -53,7 +53,7 @@ def load(args: argparse.Namespace, num_envs: int, **overrides):
     if args.run is None:
         cfg = to_container(compose("train", [f"+experiment=iiwa7_trueadapt_{args.task}"], TrainAppCfg))
     else:
-        from pathrl.eval.evaluate import load_run
+        from pathrl.runs import load_run
 
         cfg, ckpt, _ = load_run(args.run)
         ckpt = args.checkpoint or ckpt
@@ -68,11 +68,11 @@ def load(args: argparse.Namespace, num_envs: int, **overrides):
                               **{"device": EVAL_DEVICE, **overrides})
     try:
         if spec is not None:
-            from pathrl.baselines.controllers import make_controller
+            from pathrl.runs import make_controller
 
             return env, make_controller(spec, env)
         if args.run is not None:
-            from pathrl.eval.evaluate import load_policy
+            from pathrl.runs import load_policy
 
             return env, load_policy(cfg, env, ckpt)
         return env, None

@@ -20,7 +20,7 @@ import torch
 from pathrl.cli.common import ArgParser, UserError, output_file, run_cli
 from pathrl.eval.trueadapt_validation import MODES, trace, validate
 from pathrl.limits.feasible import JointLimits
-from pathrl.robot.model import load_robot_by_name
+from pathrl.robot.external import load_robot_by_name
 
 
 def plot(limits: JointLimits, joint: int, steps: int, path: Path) -> None:

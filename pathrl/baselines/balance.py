@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -212,7 +211,7 @@ class BalanceController:
                               chain_matrix(axes, leg_groups(names, "_")))
         unit = torch.tensor([[1.0, 0.0]], dtype=torch.float64)
         self.lean_dir = (lean_rotation(unit) @ self.law.ankle.T)[0]  # (J,) ankle angles per rad forward lean
-        self.upper = upper if upper is not None else _load_upper(self.cfg.policy, env)
+        self.upper = upper  # the upper body's network (None: at rest); pathrl.runs.make_controller loads cfg.policy
         self.prev_tilt = torch.zeros(env.num_envs, 2, dtype=torch.float64)
 
     def tilt(self) -> tuple[Tensor, Tensor]:
@@ -297,15 +296,3 @@ class BalanceController:
         legs = self.leg_actions(upper_acc) + self.cfg.policy_legs * out[:, self.free]
         out[:, self.free] = legs.clamp(-1.0, 1.0)
         return out.to(torch.float32)
-
-
-def _load_upper(run_dir: str, env: Any):
-    """The shipped policy network of `run_dir` (weights only), or None (`run_dir` empty: upper body at rest)."""
-    if not run_dir:
-        return None
-    from pathrl.eval.evaluate import load_policy, load_run
-
-    cfg, ckpt, _ = load_run(Path(run_dir))
-    if ckpt is None:
-        raise ValueError(f"controller balance: {run_dir} has no policy network")
-    return load_policy(cfg, env, ckpt)

@@ -14,7 +14,7 @@ Per env and decision step (batched, float64; every tensor is (N, ...)):
    centres ``+-smooth_s`` apart), ``u`` the ball's desired acceleration on the plate; the plate turns about
    the ball (``pivot``). With ``u = 0`` the in-plane specific force vanishes and a ball rolling without slip
    stays where it is (5/7 of the in-plane specific force accelerates it,
-   :class:`pathrl.envs.feedback.AnalyticBall`).
+   :class:`pathrl.sim.feedback.AnalyticBall`).
 3. **Ball feedback.** ``u = -kp x_hat - kd v_hat`` (plate frame, clipped to ``max_ball_acc``), from the
    ball position the policy observes (previous and current, 0.1 s apart): ``v_hat`` their difference,
    ``x_hat`` the position extrapolated ``lead_s`` ahead.
@@ -42,9 +42,9 @@ from torch import Tensor
 
 from pathrl.baselines.tracking import linear_action, tracking_acceleration
 from pathrl.baselines.tray_time_law import TimeLawCfg, TimeLawTable, build_time_laws
-from pathrl.envs.feedback import GRAVITY, ROLL_FACTOR, USABLE_HALF, plate_pose
 from pathrl.envs.tracking import PathTrackingEnv
 from pathrl.robot.kinematics import ForwardKinematics
+from pathrl.sim.feedback import GRAVITY, ROLL_FACTOR, USABLE_HALF, plate_pose
 
 __all__ = ["TrayController", "TrayControllerCfg", "min_jerk", "plan_durations", "quintic", "quintic_coefficients",
            "tray_normal"]

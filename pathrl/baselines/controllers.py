@@ -1,5 +1,6 @@
 """Model-based controllers that evaluate like a policy: ``controller: {name: ..., <cfg keys>}`` in a model directory's
-config.yaml (``models/iiwa7_ball_tray_controller``), or ``teacher: {...}`` of a distillation run."""
+config.yaml (``models/iiwa7_ball_tray_controller``), or ``teacher: {...}`` of a distillation run. The registry and the
+check of a spec are here; :func:`pathrl.runs.make_controller` builds one (and loads a policy network it drives)."""
 
 from __future__ import annotations
 
@@ -13,9 +14,8 @@ from pathrl.baselines.ball_feedback import TrayController, TrayControllerCfg
 from pathrl.baselines.greedy_follower import GreedyCfg, GreedyFollower
 from pathrl.baselines.law_tracker import LawTracker, LawTrackerCfg
 from pathrl.baselines.trueadapt_tray import AdaptTrayCfg, AdaptTrayController
-from pathrl.envs.tracking import PathTrackingEnv
 
-__all__ = ["CONTROLLERS", "ReferenceReplay", "ReferenceReplayCfg", "make_controller"]
+__all__ = ["CONTROLLERS", "ReferenceReplay", "ReferenceReplayCfg", "controller_cfg"]
 
 
 @dataclass(frozen=True)
@@ -42,8 +42,9 @@ CONTROLLERS = {"tray": (TrayController, TrayControllerCfg), "greedy": (GreedyFol
                "law_tracker": (LawTracker, LawTrackerCfg)}
 
 
-def make_controller(spec: dict, env: PathTrackingEnv) -> TrayController | GreedyFollower | LawTracker | ReferenceReplay:
-    """The controller named by `spec` (``{"name": "tray", **gains}``) for `env`; ValueError on a bad spec."""
+def controller_cfg(spec: dict) -> tuple[type, Any]:
+    """The controller class named by `spec` (``{"name": "tray", **gains}``) and its settings; ValueError on a bad
+    spec (unknown name or keys, a number given as text or the other way round)."""
     if not isinstance(spec, dict) or spec.get("name") not in CONTROLLERS:
         name = spec.get("name") if isinstance(spec, dict) else spec
         raise ValueError(f"controller: unknown name {name!r}; known: {sorted(CONTROLLERS)}")
@@ -58,4 +59,4 @@ def make_controller(spec: dict, env: PathTrackingEnv) -> TrayController | Greedy
            if (not isinstance(v, str) if k in text else isinstance(v, bool) or not isinstance(v, int | float))]
     if bad:
         raise ValueError(f"controller {spec['name']}: {bad} must be numbers (text: {sorted(text)})")
-    return cls(env, cfg_cls(**keys))
+    return cls, cfg_cls(**keys)

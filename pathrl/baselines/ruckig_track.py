@@ -24,11 +24,14 @@ and the limit violations of the executed samples, jerk included. On a straight l
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from pathrl.baselines.toppra import ToppraResult, limit_counts
+from pathrl.baselines.toppra_path import limit_counts
+
+if TYPE_CHECKING:
+    from pathrl.baselines.toppra import ToppraResult
 
 __all__ = ["Tracked", "ruckig_tracked", "stopping_speeds", "track_plan"]
 

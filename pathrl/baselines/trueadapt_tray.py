@@ -43,8 +43,8 @@ from torch import Tensor
 
 from pathrl.baselines.ball_feedback import tray_normal
 from pathrl.baselines.tracking import tracking_acceleration
-from pathrl.envs.feedback import plate_pose
 from pathrl.robot.kinematics import ForwardKinematics
+from pathrl.sim.feedback import plate_pose
 
 __all__ = ["AdaptTrayCfg", "AdaptTrayController", "ball_command", "cap_tilt", "pd_gains", "reference_velocities",
            "tilt_ik"]

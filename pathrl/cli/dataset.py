@@ -86,7 +86,8 @@ def print_info(meta: Mapping[str, Any], path: str, out=None) -> None:
 def print_limits(ds, out=None) -> None:
     """Per split: do the paths stay inside the position limits of the dataset's robot (if pathrl knows it)?"""
     from pathrl.dataset.limits import LIMIT_TOL, limit_excess
-    from pathrl.robot.model import RobotConfigError, load_robot_by_name
+    from pathrl.robot.external import load_robot_by_name
+    from pathrl.robot.model import RobotConfigError
 
     try:
         robot = load_robot_by_name(str(ds.meta.get("robot")))
@@ -108,14 +109,15 @@ def print_limits(ds, out=None) -> None:
 def cmd_generate(overrides: Sequence[str]) -> None:
     """``pathrl-dataset generate key=value ...``: compose ``conf/dataset_app.yaml`` with the overrides, generate the
     dataset and print its summary; bad overrides or generation errors are one-line :class:`UserError`."""
-    from pathrl.dataset.generate import GenerationError, generate_dataset
+    from pathrl.datagen.generate import generate_dataset
+    from pathrl.datagen.generators.context import GenerationError
     from pathrl.dataset.io import DatasetError
     from pathrl.robot.model import RobotConfigError
 
     bad = [o for o in overrides if "=" not in o]
     if bad:
         raise UserError(f"generate: expected key=value overrides, got {bad[0]!r}")
-    from pathrl.config.schema import DatasetAppCfg
+    from pathrl.schema import DatasetAppCfg
 
     cfg = compose("dataset_app", overrides, DatasetAppCfg)
     output_dir(str(cfg.dataset.path), "dataset.path")
@@ -141,7 +143,8 @@ def cmd_import(argv: Sequence[str]) -> None:
     from pathrl.dataset.io import DatasetError
     from pathrl.dataset.kiemel import import_kiemel
     from pathrl.dataset.waypoints import FORMATS, import_waypoints
-    from pathrl.robot.model import RobotConfigError, load_robot_by_name
+    from pathrl.robot.external import load_robot_by_name
+    from pathrl.robot.model import RobotConfigError
 
     ap = _Parser(prog="pathrl-dataset import", add_help=True)
     ap.add_argument("--format", required=True, choices=["kiemel-json", *FORMATS])

@@ -6,7 +6,7 @@
                 [task=ball_on_plate|standing] [backend=pybullet|analytic] [compile_limits=true|false]
                 [open_loop=true|false] [checkpoint=model_K.pt] [dataset.out_of_limits=refuse|clip]
 
-The arguments are Hydra overrides of ``conf/eval_app.yaml`` (schema :class:`pathrl.config.schema.EvalAppCfg`).
+The arguments are Hydra overrides of ``conf/eval_app.yaml`` (schema :class:`pathrl.schema.EvalAppCfg`).
 ``dataset=NAME`` is ``data/<the run's robot>/NAME`` (short for ``dataset.name=NAME``); neither ``dataset`` nor
 ``dataset.path``: the run's own dataset. ``task`` (group ``conf/task``; only its name is used) adds a feedback
 task to a run trained without one (its sensor values stay unobserved); runs with a task are simulated with
@@ -54,7 +54,7 @@ def _print_help() -> None:
     """The usage, the config group (``task``) and every key with its default (``conf/eval_app.yaml``)."""
     from omegaconf import OmegaConf
 
-    from pathrl.config.schema import EvalAppCfg
+    from pathrl.schema import EvalAppCfg
 
     print(__doc__.strip())
     print("\n== Configuration groups ==\nCompose your configuration from those groups (group=option)\n")
@@ -72,7 +72,7 @@ def _path_tasks() -> list[str]:
 
 def _config(argv: list[str]) -> dict[str, Any]:
     """The composed ``eval_app`` config of `argv`, checked (UserError: one line)."""
-    from pathrl.config.schema import EvalAppCfg
+    from pathrl.schema import EvalAppCfg
 
     cfg = key_value_app("eval_app", EvalAppCfg, _arguments(argv), USAGE, _LITERAL, keys=schema_keys(EvalAppCfg))
     checks = [
@@ -114,8 +114,8 @@ def _path_files_as_dataset(run_dir: Path, dataset_path: str | None) -> str | Non
     dataset they were imported into for the run's robot (:func:`pathrl.dataset.waypoints.as_dataset`)."""
     from pathrl.dataset.io import META_FILE
     from pathrl.dataset.waypoints import as_dataset
-    from pathrl.eval.evaluate import load_run
     from pathrl.robot.model import RobotConfigError, load_robot
+    from pathrl.runs import load_run
 
     if dataset_path is None or (Path(dataset_path) / META_FILE).is_file() or not Path(dataset_path).exists():
         return dataset_path
@@ -129,7 +129,8 @@ def _path_files_as_dataset(run_dir: Path, dataset_path: str | None) -> str | Non
 
 def _main(argv: list[str]) -> None:
     from pathrl.dataset.io import DatasetError
-    from pathrl.eval.evaluate import RunError, evaluate, load_run
+    from pathrl.eval.evaluate import evaluate
+    from pathrl.runs import RunError, load_run
 
     if any(a in ("-h", "--help") for a in argv):
         _print_help()

@@ -7,7 +7,7 @@ export runs) and checks both
 exports against the PyTorch actor on `observations` states the policy visits on the test split (paper
 segments); ``dataset.path`` defaults to the run's dataset, else the committed ``datasets/<robot>/<dataset>``. The
 policy's length scale comes from the run's ``summary.json`` (an error without it).
-The arguments are Hydra overrides of ``conf/export_app.yaml`` (schema :class:`pathrl.config.schema.ExportAppCfg`).
+The arguments are Hydra overrides of ``conf/export_app.yaml`` (schema :class:`pathrl.schema.ExportAppCfg`).
 """
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ def _print_help() -> None:
     """The usage and every key with its default (``conf/export_app.yaml``)."""
     from omegaconf import OmegaConf
 
-    from pathrl.config.schema import ExportAppCfg
+    from pathrl.schema import ExportAppCfg
 
     print(__doc__.strip())
     print("\n== Config ==\nOverride anything in the config (foo.bar=value)\n")
@@ -42,7 +42,7 @@ def _print_help() -> None:
 
 def _config(argv: list[str]) -> dict[str, Any]:
     """The composed ``export_app`` config of `argv`, checked (UserError: one line)."""
-    from pathrl.config.schema import ExportAppCfg
+    from pathrl.schema import ExportAppCfg
 
     cfg = key_value_app("export_app", ExportAppCfg, argv, USAGE, _LITERAL)
     if cfg["observations"] < 1:
@@ -55,9 +55,9 @@ def _main(argv: list[str]) -> None:
     from pathrl.deploy.export import export_policy
     from pathrl.envs.registry import EVAL_ENV, get_task
     from pathrl.envs.tracking_cfg import TrackingEnvCfg
-    from pathrl.eval.evaluate import RunError, load_run, policy_scale
     from pathrl.paths.knots import KnotStrategy
     from pathrl.robot.model import load_robot
+    from pathrl.runs import RunError, load_run, policy_scale
 
     if any(a in ("-h", "--help") for a in argv):
         _print_help()

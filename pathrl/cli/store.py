@@ -7,7 +7,7 @@ import sys
 from hydra.core.config_store import ConfigStore
 from omegaconf import DictConfig, OmegaConf
 
-from pathrl.config import schema
+from pathrl import schema
 
 __all__ = ["SWEEP_SETTINGS", "register", "sweep_node"]
 

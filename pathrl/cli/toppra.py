@@ -174,7 +174,7 @@ def main_(argv: list[str]) -> dict[str, Any]:
     if any(a in ("-h", "--help") for a in argv):
         print(__doc__.strip())
         return {}
-    from pathrl.config.schema import ToppraAppCfg
+    from pathrl.schema import ToppraAppCfg
 
     cfg = compose("toppra_app", argv, ToppraAppCfg)
     from pathrl.dataset.io import DatasetError, load_dataset, load_pathset

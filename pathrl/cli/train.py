@@ -57,8 +57,8 @@ def _precheck(argv: list[str]) -> dict | None:
     if any(a.split("=", 1)[0] in _NOT_A_RUN for a in argv):
         return None
     from pathrl.cli.common import UserError, compose, output_dir, to_container
-    from pathrl.config.schema import TrainAppCfg
     from pathrl.envs.registry import check_task
+    from pathrl.schema import TrainAppCfg
     from pathrl.train.runner import check_run_cfg
 
     try:

@@ -7,7 +7,8 @@ from pathlib import Path
 import numpy as np
 
 from pathrl.dataset.io import save_dataset
-from pathrl.robot.model import RobotSpec, load_robot_by_name
+from pathrl.robot.external import load_robot_by_name
+from pathrl.robot.model import RobotSpec
 
 __all__ = ["smooth_paths", "write_synthetic"]
 

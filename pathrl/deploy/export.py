@@ -19,9 +19,9 @@ from rsl_rl.modules import MLP
 
 from pathrl.envs.rewards import build_reward_terms
 from pathrl.envs.tracking import PathTrackingEnv
-from pathrl.eval.evaluate import load_policy
 from pathrl.paths.pathset import PathSet
 from pathrl.paths.segments import evaluation_plan
+from pathrl.runs import load_policy
 from pathrl.storage import atomic_write
 
 __all__ = ["EXPORT_ATOL", "env_obs", "export_policy", "float32_actor", "record_observations"]

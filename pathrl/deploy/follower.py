@@ -36,7 +36,6 @@ from pathrl.envs.registry import EVAL_ENV, get_task
 from pathrl.envs.rewards import build_reward_terms
 from pathrl.envs.tracking import PathTrackingEnv
 from pathrl.envs.tracking_cfg import TrackingEnvCfg
-from pathrl.eval.evaluate import load_policy, load_run
 from pathrl.limits.braking import is_stopped
 from pathrl.limits.integrate import interpolate_step
 from pathrl.paths.inside import INSIDE_TOL, PathOutsideError, keep_inside
@@ -45,6 +44,7 @@ from pathrl.paths.pathset import PathSet
 from pathrl.paths.quick import quick_knots, quick_pathset
 from pathrl.paths.segments import full_segments
 from pathrl.robot.model import RobotSpec, load_robot
+from pathrl.runs import load_policy, load_run
 
 __all__ = ["MEASURED_TOLERANCE", "ON_MEASURED", "SETTLE_TOLERANCE", "START_TOLERANCE", "Follower", "FollowerError",
            "PreparedPath", "Setpoints"]
@@ -134,7 +134,7 @@ class Follower:
         `control_rate` (Hz): the default rate of :meth:`decide`'s setpoints (default: the env's, 240 Hz); it must
         give a whole number of setpoints per decision (e.g. 100, 240, 250, 500, 1000 Hz for 0.1 s).
         `measured_tolerance` (rad) and `on_measured` ("refuse" or "warn"): see :meth:`decide`."""
-        from pathrl.eval.evaluate import RunError
+        from pathrl.runs import RunError
 
         try:
             cfg, ckpt, summary = load_run(Path(model_dir))
@@ -241,7 +241,7 @@ class Follower:
 
     def _build(self, paths: PathSet) -> tuple[PathTrackingEnv, torch.nn.Module]:
         """The one-env env on `paths` and the policy, or a FollowerError."""
-        from pathrl.eval.evaluate import RunError
+        from pathrl.runs import RunError
 
         try:
             env = PathTrackingEnv(self.env_cfg, self.robot, paths, build_reward_terms(self.cfg["reward"]["terms"]))

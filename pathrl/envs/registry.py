@@ -11,7 +11,9 @@ Tasks:
                       (both :class:`~pathrl.envs.trueadapt.TrueAdaptEnv`)
 
 Saved runs keep loading: a config without ``task`` is the plain tracking task (:data:`pathrl.config.migrate.NO_TASK`,
-through :func:`~pathrl.envs.factory.task_cfg`), and the names above are the ones every shipped run was saved with.
+through :func:`task_cfg`), and the names above are the ones every shipped run was saved with. A task's feedback source
+is built by :func:`make_feedback`; the env settings of a run config are
+:meth:`pathrl.envs.tracking_cfg.TrackingEnvCfg.from_run`.
 """
 
 from __future__ import annotations
@@ -20,14 +22,19 @@ from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import Any
 
+from pathrl.config.migrate import NO_TASK
 from pathrl.envs.device import EVAL_DEVICE
-from pathrl.envs.factory import make_feedback, task_cfg
 from pathrl.envs.rewards import build_reward_terms
 from pathrl.envs.tracking_cfg import TrackingEnvCfg
 from pathrl.paths.pathset import PathSet
 from pathrl.robot.model import RobotSpec, load_robot
 
-__all__ = ["EVAL_ENV", "TASKS", "EnvRequest", "Task", "check_task", "get_task", "make_env", "task_names"]
+__all__ = ["EVAL_ENV", "FEEDBACKS", "FEEDBACK_BACKENDS", "TASKS", "EnvRequest", "Task", "check_task", "get_task",
+           "make_env", "make_feedback", "task_cfg", "task_names"]
+
+#: The feedback sources a task may name (``task.feedback``) and the simulators behind them (``task.backend``).
+FEEDBACKS = ("ball_on_plate", "standing")
+FEEDBACK_BACKENDS = ("analytic", "pybullet")
 
 #: Env settings of an evaluation (and of deployment): no auto-reset, the evaluation device (the CPU, whatever device
 #: the run was trained on), and no deviation or task-failure cut-off, so that every episode runs to its end or budget
@@ -65,12 +72,54 @@ class Task:
     summary: str
 
 
+def task_cfg(cfg: dict[str, Any]) -> dict[str, Any]:
+    """The ``task`` group of a config with the keys of runs saved before tasks existed filled in (:data:`NO_TASK`)."""
+    return {**NO_TASK, **(cfg.get("task") or {})}
+
+
+def make_feedback(cfg: dict[str, Any], robot: RobotSpec, num_envs: int, seed: int, backend: str | None = None,
+                  device: str | None = None):
+    """The feedback source of a config's task (None for plain tracking); `backend` overrides task.backend. `device`:
+    the env's (default: the config's); the analytic ball is built there, PyBullet refuses any but the CPU."""
+    t = task_cfg(cfg)
+    if t["feedback"] is None:
+        return None
+    if t["feedback"] not in FEEDBACKS:
+        raise ValueError(f"task.feedback: unknown {t['feedback']!r}; known: {list(FEEDBACKS)}")
+    backend = backend or t["backend"]
+    device = str(cfg.get("device", "cpu") if device is None else device)
+    if backend == "pybullet":
+        from pathrl.envs.device import check_run_device
+
+        check_run_device({"device": device, "task": {**t, "backend": backend}})
+    rate = float(cfg["env"]["control_rate"])
+    if t["imu"] and t["feedback"] != "ball_on_plate":
+        raise ValueError(f"task.imu: the plate sensor exists only for task ball_on_plate, not {t['feedback']!r}")
+    if t["feedback"] == "standing":
+        if backend != "pybullet":
+            raise ValueError("task standing: no analytic model of a standing robot exists; use task.backend=pybullet")
+        if not robot.name.startswith("armar4"):
+            raise ValueError(f"task standing is for ARMAR-4 (armar4, armar4_legs), not {robot.name}")
+        from pathrl.sim.vec import PyBulletStanding
+
+        return PyBulletStanding(robot, num_envs, rate, seed=seed, workers=int(t["workers"]))
+    if backend == "analytic":
+        from pathrl.sim.feedback import AnalyticBall
+
+        return AnalyticBall(robot, num_envs, rate, seed=seed, device=device, imu=bool(t["imu"]))
+    if backend == "pybullet":
+        from pathrl.sim.vec import PyBulletBall
+
+        return PyBulletBall(robot, num_envs, rate, seed=seed, workers=int(t["workers"]), imu=bool(t["imu"]))
+    raise ValueError(f"task.backend: expected one of {list(FEEDBACK_BACKENDS)}, got {backend!r}")
+
+
 def _build_tracking(cfg: dict[str, Any], req: EnvRequest):
     """A :class:`PathTrackingEnv` (with the task's feedback source, if any) on the requested paths."""
     from pathrl.dataset.io import load_pathset
-    from pathrl.envs.feedback import FrozenSensor
     from pathrl.envs.tracking import PathTrackingEnv
     from pathrl.paths.knots import KnotStrategy
+    from pathrl.sim.feedback import FrozenSensor
 
     robot = req.robot or load_robot(cfg["robot"])
     paths = req.paths

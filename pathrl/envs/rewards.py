@@ -108,7 +108,7 @@ def ball_drive(q: StepQuantities, threshold: float = 0.1) -> Tensor:
     """Ball-on-plate shaping: (1 - min(1, F / threshold))^2 while the ball is on the plate, else 0.
 
     F = mean in-plane specific force on the plate during the step (task value ``ball_drive``, units of g,
-    :class:`pathrl.envs.feedback.PlateDrive`): what accelerates the ball relative to the plate (by 5/7 of
+    :class:`pathrl.sim.feedback.PlateDrive`): what accelerates the ball relative to the plate (by 5/7 of
     it). Rewards the waiter's way of carrying a tray, tilted into the acceleration; not in the paper.
     """
     return _closeness(q.task["ball_drive"], threshold) * q.task["ball_on_plate"]

@@ -2,7 +2,8 @@
 episodes (and random streams) the interrupted one was in.
 
 Captured: every tensor attribute of the env, dicts of tensors, the state of every ``torch.Generator``, and the
-same recursively for the env's parts defined in :mod:`pathrl.envs` (the analytic ball and its sensors). Static
+same recursively for the env's parts defined in :mod:`pathrl.envs` and :mod:`pathrl.sim.feedback` (the analytic
+ball and its sensors: :data:`CAPTURED_MODULES`). Static
 parts (robot, limits, path set) are rebuilt from the config and not stored. A PyBullet feedback keeps its state
 in the simulator processes: its snapshot is not exact (:func:`snapshot_is_exact`).
 """
@@ -14,14 +15,16 @@ from typing import Any
 import torch
 from torch import Tensor
 
-__all__ = ["restore", "snapshot", "snapshot_is_exact", "unwrapped"]
+__all__ = ["CAPTURED_MODULES", "restore", "snapshot", "snapshot_is_exact", "unwrapped"]
 
 
 _GEN = "__generator__"
+#: Modules whose objects the snapshot walks into (not the PyBullet feedback of :mod:`pathrl.sim.vec`).
+CAPTURED_MODULES = ("pathrl.envs.", "pathrl.sim.feedback")
 
 
 def _captured_part(x: Any) -> bool:
-    return hasattr(x, "__dict__") and type(x).__module__.startswith("pathrl.envs") and not isinstance(x, type)
+    return hasattr(x, "__dict__") and type(x).__module__.startswith(CAPTURED_MODULES) and not isinstance(x, type)
 
 
 def unwrapped(env: Any) -> Any:

@@ -15,7 +15,7 @@ MDP (paper, Sec. III; original_pathtracking.md 3-7):
   action  one value in [-1, 1] per joint, mapped into the valid acceleration range for the end of the
           next 0.1 s step (jerk/acceleration/velocity/position limits, braking stays possible).
   reward  sum of weighted terms (pathrl.envs.rewards): path length R_l and deviation R_d (+ task terms).
-  task    optional sensory feedback (pathrl.envs.feedback, e.g. a ball on a plate): it sees the step's
+  task    optional sensory feedback (pathrl.sim.feedback, e.g. a ball on a plate): it sees the step's
           control-rate setpoints, adds its sensor values to the state (``feedback_obs``), named values
           for task reward terms, and a failure (ball off the plate) that ends the episode
           (``fail_terminates``).
@@ -58,19 +58,15 @@ from torch import Tensor
 
 from pathrl import native
 from pathrl.envs import terminations as terms
-from pathrl.envs.feedback import Feedback
-from pathrl.envs.observations import (  # observe_state, tcp_observation: moved, re-exported
+from pathrl.envs.observations import (
     active_terms,
     assemble,
     observation_layout,
-    observe_state,
     tcp_distance,
-    tcp_observation,
     tracking_state,
 )
 from pathrl.envs.rewards import ENV_VALUES, TASK_VALUES, RewardTerm, StepQuantities
-from pathrl.envs.terminations import TERMINATION_REASONS  # noqa: F401 (moved)
-from pathrl.envs.tracking_cfg import FREE_JOINT_ACTIONS, TrackingEnvCfg  # noqa: F401 (moved)
+from pathrl.envs.tracking_cfg import TrackingEnvCfg
 from pathrl.limits.backend import current, env_scoped
 from pathrl.limits.braking import braking_within
 from pathrl.limits.feasible import (
@@ -86,6 +82,7 @@ from pathrl.paths.pathset import PathSet, table_position
 from pathrl.paths.segments import Segments, full_segments, sample_segments
 from pathrl.robot.kinematics import ForwardKinematics
 from pathrl.robot.model import RobotSpec
+from pathrl.sim.feedback import Feedback
 
 try:  # rsl-rl is a training dependency; the env works without it (evaluation, tests).
     from rsl_rl.env import VecEnv as _VecEnvBase
@@ -93,8 +90,7 @@ except ImportError:  # pragma: no cover
     _VecEnvBase = object
 
 
-__all__ = ["FREE_JOINT_ACTIONS", "TERMINATION_REASONS", "PathTrackingEnv", "TrackingEnvCfg", "advance",
-           "observe_state", "tcp_observation"]
+__all__ = ["PathTrackingEnv", "advance"]
 
 
 @kernel(static=True)

@@ -22,7 +22,7 @@ MDP (TrueAdapt Sec. V; iiwa7 with a ball on a plate, ``task=trueadapt_on_plate |
           :class:`~pathrl.envs.terminations.TerminationReason` codes set once per step from the pure terms of
           :mod:`pathrl.envs.terminations` (``DEVIATION``, ``TASK_FAILED``, ``TRAJECTORY_END``; first wins).
           A success is an episode that reached the end and never lost the ball.
-  ball    the analytic ball (:class:`pathrl.envs.feedback.AnalyticBall`), fed the step's control-rate
+  ball    the analytic ball (:class:`pathrl.sim.feedback.AnalyticBall`), fed the step's control-rate
           setpoints; domain randomisation per episode: radius, rolling friction (uniform in the configured
           ranges), mass (drawn and kept: the analytic rolling model does not depend on it), and Gaussian
           noise on the measured ball position. With ``task.backend=pybullet`` the PyBullet scene
@@ -44,7 +44,6 @@ from torch import Tensor
 
 from pathrl.dataset.trueadapt import TrajectoryBank
 from pathrl.envs import terminations as terms
-from pathrl.envs.feedback import PLATE_SIZE, AnalyticBall
 from pathrl.envs.observations import column_slices
 from pathrl.envs.terminations import TerminationReason
 from pathrl.envs.trueadapt_rewards import AdaptQuantities, AdaptReward
@@ -52,6 +51,7 @@ from pathrl.limits.backend import LimitBackend, env_scoped
 from pathrl.limits.feasible import JointLimits, valid_acceleration_range
 from pathrl.limits.integrate import end_of_step, interpolate_step
 from pathrl.robot.model import RobotSpec
+from pathrl.sim.feedback import PLATE_SIZE, AnalyticBall
 
 __all__ = ["MODES", "AdaptEnvCfg", "TrueAdaptEnv", "adapt_cfg_from", "ball_border_position", "ball_lost",
            "build_trueadapt_env", "check_adapt_cfg", "clip_to_range"]

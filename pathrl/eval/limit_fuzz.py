@@ -29,11 +29,12 @@ from torch import Tensor
 
 from pathrl.dataset.io import load_pathset
 from pathrl.envs.rewards import build_reward_terms
-from pathrl.envs.tracking import PathTrackingEnv, TrackingEnvCfg
+from pathrl.envs.tracking import PathTrackingEnv
+from pathrl.envs.tracking_cfg import TrackingEnvCfg
 from pathrl.limits.check import KINDS, limit_violations
 from pathrl.limits.integrate import interpolate_step
 from pathrl.paths.knots import KnotStrategy
-from pathrl.robot.model import load_robot_by_name
+from pathrl.robot.external import load_robot_by_name
 
 __all__ = ["DATASETS", "STREAMS", "FuzzResult", "fuzz_env", "fuzz_report"]
 

@@ -23,7 +23,8 @@ import torch
 from pathrl import native
 from pathrl.dataset.io import load_pathset
 from pathrl.envs.rewards import build_reward_terms
-from pathrl.envs.tracking import PathTrackingEnv, TrackingEnvCfg
+from pathrl.envs.tracking import PathTrackingEnv
+from pathrl.envs.tracking_cfg import TrackingEnvCfg
 from pathrl.limits.backend import current
 from pathrl.limits.integrate import interpolate_step
 from pathrl.paths.knots import KnotStrategy
@@ -129,7 +130,7 @@ def main(argv: list[str] | None = None) -> int:
     import argparse
     from pathlib import Path
 
-    from pathrl.robot.model import load_robot_by_name
+    from pathrl.robot.external import load_robot_by_name
     from pathrl.storage import write_json_atomic
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])

@@ -63,8 +63,8 @@ def measure(model: Path, dataset: str | None, decisions: int) -> dict[str, Any]:
     from pathrl import native
     from pathrl.envs.device import EVAL_DEVICE
     from pathrl.envs.trueadapt import build_trueadapt_env
-    from pathrl.eval.evaluate import committed_split, load_policy, load_run
     from pathrl.limits.backend import current
+    from pathrl.runs import committed_split, load_policy, load_run
 
     cfg, ckpt, _ = load_run(model)
     cfg["task"]["backend"] = "analytic"

@@ -20,12 +20,12 @@ import torch
 from tensordict import TensorDict
 from torch import Tensor
 
-from pathrl.envs.feedback import PLATE_SIZE, plate_pose
 from pathrl.envs.trueadapt import TrueAdaptEnv
 from pathrl.eval.trueadapt import ObservingPolicy, run_trajectories
 from pathrl.logging.mcap_io import McapJsonWriter
 from pathrl.logging.schema import LIMIT_FIELDS, TRUEADAPT_EPISODE, TRUEADAPT_ROBOT, TRUEADAPT_STEP
 from pathrl.robot.kinematics import ForwardKinematics, matrix_to_quat
+from pathrl.sim.feedback import PLATE_SIZE, plate_pose
 from pathrl.storage import atomic_write
 
 __all__ = ["FILE_NAME", "NOMINAL_RADIUS", "record_trueadapt", "robot_message", "run_batch"]

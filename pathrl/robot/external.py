@@ -1,9 +1,10 @@
-"""Robots from outside the package: one YAML beside a URDF, found by every CLI through ``PATHRL_ROBOT_PATH``.
+"""Robots by name (:func:`load_robot_by_name`): a shipped ``conf/robot/<name>.yaml``, or a robot from outside the
+package: one YAML beside a URDF, found by every CLI through ``PATHRL_ROBOT_PATH``.
 
 ``PATHRL_ROBOT_PATH`` holds directories and YAML files separated by ``os.pathsep`` (``:``); every ``*.yaml`` in them
 is a robot named by its ``name`` (default: the file's stem), usable as ``robot=NAME`` in every CLI (registered with
-Hydra's config store by the CLI layer) and by :func:`pathrl.robot.model.load_robot_by_name`. A name of a shipped
-robot cannot be reused. The YAML has the keys of ``conf/robot/*.yaml`` (``pathrl.config.schema.RobotCfg``), with
+Hydra's config store by the CLI layer) and by :func:`load_robot_by_name`. A name of a shipped
+robot cannot be reused. The YAML has the keys of ``conf/robot/*.yaml`` (``pathrl.schema.RobotCfg``), with
 these differences:
 
 - ``urdf``: a path relative to the YAML's directory, an absolute path, or ``pybullet_data:<file>`` (the URDFs that
@@ -32,8 +33,8 @@ import numpy as np
 from pathrl.config.paths import CONF_DIR
 from pathrl.robot.model import RobotConfigError, RobotSpec, load_robot
 
-__all__ = ["JERK_PER_ACCELERATION", "ROBOT_PATH_ENV", "expand_robot_file", "load_robot_file", "robot_files",
-           "urdf_limits"]
+__all__ = ["JERK_PER_ACCELERATION", "ROBOT_PATH_ENV", "expand_robot_file", "load_robot_by_name", "load_robot_file",
+           "robot_files", "urdf_limits"]
 
 ROBOT_PATH_ENV = "PATHRL_ROBOT_PATH"
 #: Jerk limit per acceleration limit (1/s) when a robot YAML gives none.
@@ -176,3 +177,19 @@ def load_robot_file(path: str | os.PathLike) -> RobotSpec:
     except (KeyError, ValueError) as exc:
         raise RobotConfigError(f"{path}: tcps: {exc}") from None
     return spec
+
+
+def load_robot_by_name(name: str, conf_dir: Path = CONF_DIR) -> RobotSpec:
+    """Load ``conf/robot/<name>.yaml``, or a robot YAML on ``PATHRL_ROBOT_PATH`` (outside Hydra: tests, tools,
+    notebooks)."""
+    from omegaconf import OmegaConf
+
+    path = conf_dir / "robot" / f"{name}.yaml"
+    if not path.is_file():
+        external = robot_files()
+        if name in external:  # a robot YAML on PATHRL_ROBOT_PATH (this module)
+            return load_robot(expand_robot_file(external[name]))
+        choices = sorted({p.stem for p in (conf_dir / "robot").glob("*.yaml")} | set(external))
+        raise RobotConfigError(f"unknown robot {name!r}; choose one of {choices} (more: PATHRL_ROBOT_PATH)")
+    cfg = OmegaConf.to_container(OmegaConf.load(path), resolve=True)
+    return load_robot(cfg)

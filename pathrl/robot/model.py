@@ -14,9 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from pathrl.config.paths import CONF_DIR
-
-__all__ = ["CONF_DIR", "RobotConfigError", "RobotSpec", "Tcp", "load_robot", "load_robot_by_name", "resolve_urdf"]
+__all__ = ["RobotConfigError", "RobotSpec", "Tcp", "load_robot", "resolve_urdf"]
 
 ASSET_DIR = Path(__file__).resolve().parent.parent / "assets" / "urdf"
 
@@ -133,21 +131,3 @@ def load_robot(cfg: Mapping[str, Any]) -> RobotSpec:
         workspace=workspace,
         floor_z=float(cfg.get("floor_z", 0.0)),
     )
-
-
-def load_robot_by_name(name: str, conf_dir: Path = CONF_DIR) -> RobotSpec:
-    """Load ``conf/robot/<name>.yaml``, or a robot YAML on ``PATHRL_ROBOT_PATH`` (outside Hydra: tests, tools,
-    notebooks)."""
-    from omegaconf import OmegaConf
-
-    path = conf_dir / "robot" / f"{name}.yaml"
-    if not path.is_file():
-        from pathrl.robot.external import expand_robot_file, robot_files
-
-        external = robot_files()
-        if name in external:  # a robot YAML on PATHRL_ROBOT_PATH (pathrl.robot.external)
-            return load_robot(expand_robot_file(external[name]))
-        choices = sorted({p.stem for p in (conf_dir / "robot").glob("*.yaml")} | set(external))
-        raise RobotConfigError(f"unknown robot {name!r}; choose one of {choices} (more: PATHRL_ROBOT_PATH)")
-    cfg = OmegaConf.to_container(OmegaConf.load(path), resolve=True)
-    return load_robot(cfg)

@@ -19,8 +19,8 @@ from pathlib import Path
 import numpy as np
 import pybullet as p
 
-from pathrl.envs.feedback import PLACE_MARGIN, PLATE_SIZE, USABLE_HALF
 from pathrl.robot.model import RobotSpec
+from pathrl.sim.feedback import PLACE_MARGIN, PLATE_SIZE, USABLE_HALF
 from pathrl.sim.scene import MotorScene, load_urdf_text, z_tilt_deg
 
 __all__ = ["BallOnPlateScene", "BallParams", "PLATE_SIZE", "USABLE_HALF", "plate_urdf", "sample_ball"]

@@ -1,5 +1,5 @@
 """Batched PyBullet feedback: N scenes spread over worker processes (one DIRECT client per scene), behind the
-env's :class:`pathrl.envs.feedback.Feedback` interface.
+env's :class:`pathrl.sim.feedback.Feedback` interface.
 
 Each worker owns a contiguous block of envs. A decision step sends every worker its block of control-rate
 setpoints (n_w, C, D) and receives the sensor readings; the workers simulate in parallel. Scene ``i`` is
@@ -20,8 +20,8 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from pathrl.envs.feedback import USABLE_HALF, FeedbackStep, PlateDrive, PlateIMU, ball_observation
 from pathrl.robot.model import RobotSpec
+from pathrl.sim.feedback import USABLE_HALF, FeedbackStep, PlateDrive, PlateIMU, ball_observation
 
 __all__ = ["BASE_POS_SCALE", "PyBulletBall", "PyBulletStanding", "ScenePool"]
 
@@ -246,7 +246,7 @@ class PyBulletBall(_PooledFeedback):
 
     def values(self) -> dict[str, Tensor]:
         """Task values (N,) for reward terms: ball_dist (centre distance / usable half-size), ball_on_plate (1/0),
-        ball_drive (:class:`~pathrl.envs.feedback.PlateDrive`)."""
+        ball_drive (:class:`~pathrl.sim.feedback.PlateDrive`)."""
         return {"ball_dist": (self.xy / self.half).norm(dim=1), "ball_on_plate": self.ok.to(torch.float64),
                 "ball_drive": self.plate_drive.value}
 

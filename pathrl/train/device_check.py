@@ -59,7 +59,7 @@ CHECKED_TASKS = ("tracking", "ball_on_plate")
 def model_cfg(model: Path) -> tuple[dict[str, Any], Path]:
     """(run config in the current layout, checkpoint) of a shipped model or run directory; ValueError (one line) for a
     controller's directory or a task outside :data:`CHECKED_TASKS`."""
-    from pathrl.eval.evaluate import load_run
+    from pathrl.runs import load_run
 
     cfg, ckpt, _ = load_run(Path(model))
     if ckpt is None:
@@ -148,7 +148,7 @@ def step_parity(model: Path, dataset: Path, other: str, num_envs: int = 64, step
     `other` with the torch code, from the same start states (the CPU env's copied over), stepped with the CPU
     policy's actions; the largest absolute differences over all steps (``max_abs``) and ``ok`` (within
     :data:`PARITY_TOL`). ``action``: the policy on `other` against the CPU policy on the same observations."""
-    from pathrl.eval.evaluate import load_policy
+    from pathrl.runs import load_policy
 
     cfg, ckpt = model_cfg(model)
     backend = "analytic" if (cfg.get("task") or {}).get("feedback") == "ball_on_plate" else None

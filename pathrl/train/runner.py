@@ -240,10 +240,10 @@ class PathRLDistillationRunner(PathRLRunner, DistillationRunner):
 
 def check_run_cfg(cfg: dict[str, Any]) -> None:
     """Refuse run-level values that would run but give a wrong result (one-line ValueError naming the key); the
-    env's own values are checked by :class:`pathrl.envs.tracking.TrackingEnvCfg`; unknown keys are refused."""
+    env's own values are checked by :class:`pathrl.envs.tracking_cfg.TrackingEnvCfg`; unknown keys are refused."""
     from pathrl.config.agent import check_agent
-    from pathrl.config.schema import TrainAppCfg
     from pathrl.config.validate import check_keys
+    from pathrl.schema import TrainAppCfg
 
     check_keys(cfg, TrainAppCfg)
     if int(cfg["iterations"]) < 1:
@@ -418,7 +418,7 @@ def _init_std(cfg: dict[str, Any]) -> float:
 
 def _with_teacher(cfg: dict[str, Any], env: PathTrackingEnv):
     """The env of a distillation run: its observations carry the teacher controller's actions."""
-    from pathrl.baselines.controllers import make_controller
+    from pathrl.runs import make_controller
     from pathrl.train.distill import TeacherLabels
 
     if not cfg.get("teacher"):
@@ -434,7 +434,7 @@ def _with_teacher(cfg: dict[str, Any], env: PathTrackingEnv):
 
 def _with_base(cfg: dict[str, Any], env: PathTrackingEnv) -> ResidualEnv:
     """The env of a residual run: it acts with the controller's action plus the policy's scaled residual."""
-    from pathrl.baselines.controllers import make_controller
+    from pathrl.runs import make_controller
 
     scale, spec = check_residual_cfg(cfg["residual"])
     return ResidualEnv(env, make_controller(spec, env), scale)

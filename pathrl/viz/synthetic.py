@@ -35,8 +35,8 @@ def write_synthetic_episodes(
     path: str | Path, robot: str = "iiwa7", episodes: int = 3, steps: int = 45, seed: int = 0, dt: float = DT
 ) -> Path:
     """Write `episodes` episodes of about `steps` decision steps for conf robot `robot`; returns `path`."""
+    from pathrl.robot.external import load_robot_by_name
     from pathrl.robot.kinematics import ForwardKinematics
-    from pathrl.robot.model import load_robot_by_name
 
     spec = load_robot_by_name(robot)
     fk = ForwardKinematics(spec)

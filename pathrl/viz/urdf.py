@@ -22,7 +22,7 @@ def resolve_urdf(robot: RobotInfo) -> Path | None:
     if robot.urdf and Path(robot.urdf).is_file():
         return Path(robot.urdf)
     try:
-        from pathrl.robot.model import load_robot_by_name
+        from pathrl.robot.external import load_robot_by_name
 
         return load_robot_by_name(robot.name).urdf
     except Exception:

@@ -1,7 +1,8 @@
 """Dataclass schemas of every config group. Hydra validates composed YAML against these.
 
 No logic here: the schema names the keys and their types; defaults live in ``conf/``. The ``env`` group's schema is
-the env's own settings class (:class:`pathrl.envs.tracking_cfg.EnvSettings`, defaults there), also used at run time.
+the env's own settings class (:class:`pathrl.envs.tracking_cfg.EnvSettings`, defaults there), also used at run time,
+so the schemas sit above the env (the rest of config support, below every layer: :mod:`pathrl.config`).
 """
 
 from __future__ import annotations

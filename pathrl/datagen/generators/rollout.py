@@ -15,8 +15,8 @@ from typing import Any, Protocol
 import numpy as np
 import torch
 
-from pathrl.dataset.generators.context import GeneratorContext
-from pathrl.dataset.generators.ik import sample_starts
+from pathrl.datagen.generators.context import GeneratorContext
+from pathrl.datagen.generators.ik import sample_starts
 from pathrl.paths.spline import dedupe_knots, resample_by_distance, sample_uniform
 
 __all__ = ["MotionPolicy", "path_valid", "rollout_paths", "stored_rollout_paths"]

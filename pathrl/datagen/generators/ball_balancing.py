@@ -9,8 +9,8 @@ from typing import Any
 import numpy as np
 import torch
 
-from pathrl.dataset.generators.context import GenerationError, GeneratorContext
-from pathrl.dataset.generators.rollout import _cut
+from pathrl.datagen.generators.context import GenerationError, GeneratorContext
+from pathrl.datagen.generators.rollout import _cut
 from pathrl.dataset.io import DatasetError
 from pathrl.paths.spline import PathError, resample_by_distance, sample_uniform
 from pathrl.robot.model import RobotSpec

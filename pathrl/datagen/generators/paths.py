@@ -1,5 +1,5 @@
 """The chunked, seeded pipeline of the path kinds: chunks of a split run in worker processes, each from its own
-random streams (:func:`pathrl.dataset.generators.context.chunk_rngs`); the result is saved with statistics of
+random streams (:func:`pathrl.datagen.generators.context.chunk_rngs`); the result is saved with statistics of
 the stored knots and of the default knot strategy (whose knots are cached)."""
 
 from __future__ import annotations
@@ -11,10 +11,10 @@ from typing import Any
 
 import numpy as np
 
-from pathrl.dataset.generators import path_kind
-from pathrl.dataset.generators.context import chunk_rngs, process_context
-from pathrl.dataset.generators.defaults import resolve_params
-from pathrl.dataset.generators.jobs import SPLIT_IDS, Job, chunk_jobs, run_jobs, split_counts
+from pathrl.datagen.generators import path_kind
+from pathrl.datagen.generators.context import chunk_rngs, process_context
+from pathrl.datagen.generators.defaults import resolve_params
+from pathrl.datagen.generators.jobs import SPLIT_IDS, Job, chunk_jobs, run_jobs, split_counts
 from pathrl.dataset.io import (
     Dataset,
     DatasetError,

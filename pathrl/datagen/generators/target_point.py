@@ -8,9 +8,9 @@ from typing import Any
 import numpy as np
 import torch
 
-from pathrl.dataset.generators.context import GeneratorContext
-from pathrl.dataset.generators.ik import solve_ik
-from pathrl.dataset.generators.rollout import stored_rollout_paths
+from pathrl.datagen.generators.context import GeneratorContext
+from pathrl.datagen.generators.ik import solve_ik
+from pathrl.datagen.generators.rollout import stored_rollout_paths
 from pathrl.robot.model import RobotSpec
 
 __all__ = ["KIND", "check_robot", "stored_paths"]
@@ -164,6 +164,6 @@ def stored_paths(
     tgen: torch.Generator,
     stats: dict[str, int],
 ) -> list[np.ndarray]:
-    """`n` stored paths of one chunk (:func:`pathrl.dataset.generators.rollout.stored_rollout_paths`)."""
+    """`n` stored paths of one chunk (:func:`pathrl.datagen.generators.rollout.stored_rollout_paths`)."""
     return stored_rollout_paths(ctx, lambda b: _TargetPolicy(ctx, params, b, rng, tgen), params, n, rng, stats)
 

@@ -9,8 +9,8 @@ from typing import Any
 import numpy as np
 import torch
 
-from pathrl.dataset.generators.context import GeneratorContext
-from pathrl.dataset.generators.rollout import stored_rollout_paths
+from pathrl.datagen.generators.context import GeneratorContext
+from pathrl.datagen.generators.rollout import stored_rollout_paths
 from pathrl.robot.model import RobotSpec
 
 __all__ = ["KIND", "check_robot", "stored_paths"]
@@ -61,6 +61,6 @@ def stored_paths(
     tgen: torch.Generator,
     stats: dict[str, int],
 ) -> list[np.ndarray]:
-    """`n` stored paths of one chunk (:func:`pathrl.dataset.generators.rollout.stored_rollout_paths`)."""
+    """`n` stored paths of one chunk (:func:`pathrl.datagen.generators.rollout.stored_rollout_paths`)."""
     return stored_rollout_paths(ctx, lambda b: _RandomPolicy(ctx, params, b, tgen), params, n, rng, stats)
 

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import torch
 
-from pathrl.dataset.generators.context import GenerationError, GeneratorContext
+from pathrl.datagen.generators.context import GenerationError, GeneratorContext
 
 __all__ = ["sample_starts", "solve_ik"]
 
