@@ -36,7 +36,7 @@ import numpy as np
 
 from pathrl.industrial import arm
 
-__all__ = ["LINK_BOX", "LINK_COM", "LINK_MASSES", "ArmModel", "Dynamics", "nominal", "perturbed"]
+__all__ = ["LINK_BOX", "LINK_COM", "LINK_MASSES", "ArmModel", "Dynamics", "cached", "nominal", "perturbed"]
 
 #: Estimated link masses (kg), links 1-6 (the table in the module doc).
 LINK_MASSES = (420.0, 130.0, 200.0, 100.0, 35.0, 5.0)
