@@ -180,6 +180,7 @@ class TaskCfg:
     observe: bool = True  # sensor values in the state
     fail_terminates: bool = True  # the task's failure (ball off the plate) ends the episode
     imu: bool = False  # ball_on_plate: the plate's inertial sensor reading joins the state (feedback.PlateIMU)
+    critic_obs: bool = False  # an asymmetric critic: a privileged group "critic" (PathTrackingEnv.critic_observation)
     adapt: dict[str, Any] = field(default_factory=dict)  # TrueAdapt task settings (pathrl.envs.trueadapt); {}: none
 
 

@@ -155,6 +155,28 @@ def test_ball_task_env_contract(iiwa):
         assert set(env.last_step) >= {"task/ball_dist", "task/ball_on_plate", "task_failed"}
 
 
+def test_the_asymmetric_critic_sees_time_and_arc_left_and_the_ball_parameters(iiwa):
+    """task.critic_obs: a group "critic" beside the unchanged policy state: time left / 10 s, arc length left / 10
+    rad, the ball's velocity (m/s), radius / 30 mm and rolling friction / 1 mm (hand-checked against the env)."""
+    env = ball_env(iiwa, critic_obs=True)
+    plain = ball_env(iiwa)
+    obs = env.get_observations()
+    assert set(obs.keys()) == {"policy", "critic"} and set(plain.get_observations().keys()) == {"policy"}
+    torch.testing.assert_close(obs["policy"], plain.get_observations()["policy"])
+    for _ in range(3):
+        obs, *_ = env.step(torch.zeros(8, 7))
+    c, ball = obs["critic"], env.feedback
+    assert c.shape == (8, 6) and c.dtype == torch.float32
+    steps_left = (env.budget - env.episode_length_buf).to(torch.float64)
+    torch.testing.assert_close(c[:, 0].double(), steps_left * env.cfg.dt / 10.0, atol=1e-6, rtol=0)
+    assert bool((env.episode_length_buf == 3).all())
+    assert bool((c[:, 0] < env.max_episode_length * env.cfg.dt / 10).all())
+    torch.testing.assert_close(c[:, 1].double(), (env.end_s - env.s) / 10.0, atol=1e-6, rtol=0)
+    torch.testing.assert_close(c[:, 2:4].double(), ball.vxy, atol=1e-6, rtol=0)
+    assert bool(((c[:, 4] >= 0.02 / 0.03 - 1e-6) & (c[:, 4] <= 0.036 / 0.03 + 1e-6)).all())
+    assert bool(((c[:, 5] >= 0.1 - 1e-6) & (c[:, 5] <= 0.7 + 1e-6)).all())
+
+
 def test_ball_leaving_the_plate_ends_the_episode(iiwa):
     env = ball_env(iiwa, num_envs=2)
     fb = env.feedback

@@ -9,6 +9,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+import torch
 
 from pathrl.logging.mcap_io import read_messages
 from pathrl.repro.figures import learning_curves
@@ -160,6 +161,22 @@ def test_ball_task_warm_start_train_and_pybullet_eval(tiny_dataset, tmp_path):
     # a warm start from nowhere is one clear line
     r = run(train_cmd(tiny_dataset, tmp_path / "x", 1, f"init_from={tmp_path / 'missing'}"))
     assert r.returncode != 0 and "init_from" in r.stderr.strip().splitlines()[-1]
+
+
+def test_ball_task_from_scratch_with_an_asymmetric_critic_trains_and_evaluates_in_pybullet(tiny_dataset, tmp_path):
+    """The Table VII from-scratch recipe (task.critic_obs, the critic reads policy + critic groups, a noise floor):
+    the critic's first layer takes the privileged inputs, the actor does not; PyBullet evaluation loads the actor."""
+    run_dir = tmp_path / "scratch"
+    r = run(train_cmd(tiny_dataset, run_dir, 1, "+experiment=iiwa7_ball_balancing_reward_scratch"))
+    assert r.returncode == 0, r.stderr[-2000:]
+    state = torch.load(run_dir / "model_0.pt", weights_only=True)
+    actor_in = next(v for k, v in state["actor_state_dict"].items() if k.endswith("weight")).shape[1]
+    critic_in = next(v for k, v in state["critic_state_dict"].items() if k.endswith("weight")).shape[1]
+    assert critic_in == actor_in + 6  # time left, arc length left, ball velocity (2), radius, rolling friction
+    r = run([str(BIN / "pathrl-eval"), f"run_dir={run_dir}", "compile_limits=false", "episodes=2", "segments=full",
+             f"out={tmp_path / 'eval'}", "record=false"])
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert json.loads((tmp_path / "eval" / "metrics.json").read_text())["task"]["backend"] == "PyBulletBall"
 
 
 def test_resume_accepts_keys_added_later_only_at_their_old_behaviour():

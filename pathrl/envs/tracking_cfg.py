@@ -98,6 +98,7 @@ class TrackingEnvCfg(EnvSettings):
     n_state: int = 9  # knots in the observation (knots.n_state)
     feedback_obs: bool = True  # with a feedback source: its sensor values are part of the state (task.observe)
     fail_terminates: bool = True  # with a feedback source: its failure (ball off the plate) ends the episode
+    critic_obs: bool = False  # the observation also holds the privileged group "critic" (task.critic_obs)
     autoreset: bool = True
     #: the limit code of this env's steps (pathrl.limits.backend); None: the one in effect at each call (training:
     #: the run's native_limits / compile_limits around its iterations; evaluation: its compile_limits flag)
@@ -114,7 +115,8 @@ class TrackingEnvCfg(EnvSettings):
         task = cfg["task"]
         extra = {"device": str(cfg.get("device", "cpu")), "seed": int(cfg.get("seed", 0) if seed is None else seed),
                  "knot_gap_norm": knot_gap_norm, "n_state": int(cfg["knots"]["n_state"]),
-                 "feedback_obs": bool(task["observe"]), "fail_terminates": bool(task["fail_terminates"])}
+                 "feedback_obs": bool(task["observe"]), "fail_terminates": bool(task["fail_terminates"]),
+                 "critic_obs": bool(task.get("critic_obs", False))}
         if num_envs:
             extra["num_envs"] = int(num_envs)
         return cls.from_mapping(cfg["env"], **extra)

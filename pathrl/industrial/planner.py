@@ -38,7 +38,8 @@ from scipy.spatial.transform import Rotation
 from pathrl.industrial import arm
 from pathrl.industrial.program import DEFAULT_SEED, Program, blend_polyline
 
-__all__ = ["CornerEvent", "Plan", "PlannerParams", "blend_orientations", "moving_average", "plan", "plan_zones", "speed_profile"]
+__all__ = ["CornerEvent", "Plan", "PlannerParams", "blend_orientations", "moving_average", "plan", "plan_zones",
+           "speed_profile"]
 
 DEG = np.pi / 180.0
 

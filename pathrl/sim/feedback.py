@@ -332,6 +332,11 @@ class AnalyticBall:
         """See :meth:`Feedback.observe`: the ball state (N, 4), clamped to [-1, 1]."""
         return ball_observation(self.prev_rel, self.xy / self.half, self.imu).clamp(-1.0, 1.0)
 
+    def privileged(self) -> Tensor:
+        """What an asymmetric critic may see and the policy does not (N, 4) float64: the ball's velocity on the
+        plate (m/s, 2), its radius / 30 mm and its rolling friction coefficient / 1 mm (drawn per episode)."""
+        return torch.cat([self.vxy, (self.radius / 0.03)[:, None], (self.roll_mu / 1e-3)[:, None]], dim=1)
+
     def close(self) -> None:
         """Nothing to release (torch model)."""
         pass
