@@ -24,7 +24,7 @@ from pathrl.paths.quick import (
     quick_pathset,
 )
 from pathrl.paths.spline import chord_params, curvature_integral
-from pathrl.robot.model import load_robot_by_name
+from pathrl.robot.external import load_robot_by_name
 
 ROOT = Path(__file__).resolve().parents[1]
 

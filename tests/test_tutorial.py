@@ -127,7 +127,7 @@ def _run_example(args: list[str], capsys) -> str:
 def _check_outcome(prog: str, args: list[str], out: str, knots: np.ndarray | None) -> None:
     """What the command left behind in the scratch directory (relative paths: the page's)."""
     from pathrl.dataset.io import load_dataset
-    from pathrl.robot.model import load_robot_by_name
+    from pathrl.robot.external import load_robot_by_name
 
     kv = dict(a.split("=", 1) for a in args if "=" in a and not a.startswith("-"))
     if prog == "pathrl-robot" and args[0] == "check":
@@ -189,8 +189,7 @@ def _run_loop(body: str, knots: np.ndarray, monkeypatch) -> None:
 
 
 def test_the_tutorial_runs_as_written(tmp_path, monkeypatch, capsys):
-    from pathrl.robot.external import expand_robot_file
-    from pathrl.robot.model import load_robot_by_name
+    from pathrl.robot.external import expand_robot_file, load_robot_by_name
 
     (tmp_path / "examples").symlink_to(ROOT / "examples")
     monkeypatch.chdir(tmp_path)

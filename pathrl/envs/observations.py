@@ -33,9 +33,9 @@ from pathrl.limits.kernels import kernel
 if TYPE_CHECKING:
     from pathrl.envs.tracking import PathTrackingEnv
 
-__all__ = ["OBS_ORDER", "OBS_TERMS", "ObsTerm", "active_terms", "assemble", "column_slices", "feedback_size",
-           "observation_layout", "observe_state", "path_error", "reference_and_commanded_tcp", "state_fields",
-           "state_size", "tcp_distance", "tcp_observation", "tcp_size", "tracking_state"]
+__all__ = ["OBS_ORDER", "OBS_TERMS", "ObsTerm", "active_terms", "assemble", "column_slices", "critic_observation",
+           "feedback_size", "observation_layout", "observe_state", "path_error", "reference_and_commanded_tcp",
+           "state_fields", "state_size", "tcp_distance", "tcp_observation", "tcp_size", "tracking_state"]
 
 
 @kernel(static=True)
@@ -181,6 +181,19 @@ OBS_TERMS: dict[str, ObsTerm] = {t.name: t for t in (
 )}
 #: Their names in order.
 OBS_ORDER = tuple(OBS_TERMS)
+
+
+def critic_observation(env: PathTrackingEnv) -> Tensor:
+    """The privileged group of an asymmetric critic (``task.critic_obs``) (N, 2 + k) float32: the time left before
+    the episode's time limit (s) / 10, the arc length left to the segment's end (rad) / 10, and the feedback
+    source's ``privileged()`` values (k of them; none for a source without it, e.g. the PyBullet ball, which only
+    evaluations use: they load the actor alone)."""
+    left = (env.budget - env.episode_length_buf).to(torch.float64) * env.cfg.dt / 10.0
+    parts = [left[:, None], ((env.end_s - env.s) / 10.0)[:, None]]
+    privileged = getattr(env.feedback, "privileged", None)
+    if privileged is not None:
+        parts.append(privileged().to(env.device))
+    return torch.cat(parts, dim=1).to(torch.float32)
 
 
 def active_terms(env: PathTrackingEnv) -> list[ObsTerm]:

@@ -61,6 +61,7 @@ from pathrl.envs import terminations as terms
 from pathrl.envs.observations import (
     active_terms,
     assemble,
+    critic_observation,
     observation_layout,
     tcp_distance,
     tracking_state,
@@ -334,24 +335,12 @@ class PathTrackingEnv(_VecEnvBase):
         """Observation size."""
         return int(self._obs.shape[1])
 
-    def critic_observation(self) -> Tensor:
-        """The privileged group of an asymmetric critic (N, 2 + k) float32: the time left before the episode's time
-        limit (s) / 10, the arc length left to the segment's end (rad) / 10, and the feedback source's
-        ``privileged()`` values (k of them; none for a source without it, e.g. the PyBullet ball, which only
-        evaluations use: they load the actor alone)."""
-        left = (self.budget - self.episode_length_buf).to(torch.float64) * self.cfg.dt / 10.0
-        parts = [left[:, None], ((self.end_s - self.s) / 10.0)[:, None]]
-        privileged = getattr(self.feedback, "privileged", None)
-        if privileged is not None:
-            parts.append(privileged().to(self.device))
-        return torch.cat(parts, dim=1).to(torch.float32)
-
     def get_observations(self) -> TensorDict:
         """The current observations: ``{"policy": (N, num_obs)}``, with ``critic_obs`` also ``"critic"``
-        (:meth:`critic_observation`)."""
+        (:func:`~pathrl.envs.observations.critic_observation`)."""
         groups = {"policy": self._obs}
         if self.cfg.critic_obs:
-            groups["critic"] = self.critic_observation()
+            groups["critic"] = critic_observation(self)
         return TensorDict(groups, batch_size=[self.num_envs], device=self.device)
 
     # ------------------------------------------------------------------ step

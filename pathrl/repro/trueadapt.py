@@ -161,6 +161,7 @@ ROWS: tuple[AdaptRow, ...] = (
              AdaptEval("on_plate", PPO + "_no_jerk")),
     AdaptRow("on_plate/no_acceleration_penalty", "on plate: no acceleration penalty",
              _PPO + " without the acceleration penalty", AdaptEval("on_plate", PPO + "_no_acceleration")),
+    _scratch_row("no_acceleration_penalty", "no acceleration penalty", "no_acc_penalty"),
     AdaptRow("on_plate/tray_controller", "on plate: model-based tray controller", _TRAY,
              AdaptEval("on_plate", "iiwa7_trueadapt_on_plate_tray_controller"), in_paper=False),
     AdaptRow("in_place/reference", "in place: reference trajectories (no adaptations)", "the reference replayed",
