@@ -17,17 +17,15 @@ The loop stops at the 0.5 mm spec or after ``k_max`` updates and returns the bes
 
 from __future__ import annotations
 
-import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 from scipy.ndimage import gaussian_filter1d
 
-from pathrl.industrial.controller import ControllerParams, execute
+from pathrl.industrial.controller import ControllerParams, Execution
 from pathrl.industrial.features import match
-from pathrl.industrial.metrics import POS_SPEC_MM, evaluate
-from pathrl.industrial.mpgd import IWAResult
+from pathrl.industrial.mpgd import IWAResult, iterate_waypoints
 from pathrl.industrial.program import Program
 from pathrl.industrial.trajectories import Target, baseline_program, waypoint_indices
 
@@ -78,37 +76,22 @@ def ilc_update(positions: np.ndarray, e: np.ndarray, params: ILCParams, g: np.nd
 
 def run_ilc(target: Target, program: Program, v: float, params: ILCParams | None = None,
             controller: ControllerParams | None = None, seed: int = 0) -> IWAResult:
-    """ILC from `program` at speed command `v` mm/s; execution k uses seed + k (module doc)."""
+    """ILC from `program` at speed command `v` mm/s; execution k uses seed + k (module doc; the loop is
+    :func:`~pathrl.industrial.mpgd.iterate_waypoints`)."""
     params = ILCParams() if params is None else params
     controller = ControllerParams() if controller is None else controller
     psi = waypoint_indices(len(target.p), len(program.positions))
-    t0 = time.perf_counter()
-    best: IWAResult | None = None
-    history: list[float] = []
-    prev: tuple[np.ndarray, np.ndarray] | None = None
-    for k in range(params.k_max + 1):
-        try:
-            ex = execute(program, v, controller, seed=seed + k)
-        except ValueError:  # the moved program left the arm's reach: stop with the best so far
-            break
-        errs = evaluate(ex.p, ex.rot, 1.0 / controller.rate, target.p, target.z_axis)
-        history.append(errs.max_pos_mm)
-        if best is None or errs.max_pos_mm < best.errors.max_pos_mm:
-            best = IWAResult(program, errs)
-        if errs.max_pos_mm <= POS_SPEC_MM:
-            best.iterations_to_spec = k
-            break
-        if k == params.k_max:
-            break
+    prev: list[tuple[np.ndarray, np.ndarray]] = []  # the last (waypoints, errors), for the filtered plant gain
+
+    def update(_k: int, prog: Program, ex: Execution) -> Program:
         e = match(target.p, target.z_axis, ex.p, ex.rot[:, :, 2]).err[psi]
         g = None
-        if params.kind == "filtered" and prev is not None:
-            g = plant_gain(program.positions - prev[0], e - prev[1], params.q_sigma, params.g_min)
-        prev = (program.positions, e)
-        program = program.with_positions(ilc_update(program.positions, e, params, g))
-    assert best is not None
-    best.history, best.executions, best.t_opt = history, len(history), time.perf_counter() - t0
-    return best
+        if params.kind == "filtered" and prev:
+            g = plant_gain(prog.positions - prev[-1][0], e - prev[-1][1], params.q_sigma, params.g_min)
+        prev[:] = [(prog.positions, e)]
+        return prog.with_positions(ilc_update(prog.positions, e, params, g))
+
+    return iterate_waypoints(target, program, v, controller, seed, params.k_max, update)
 
 
 def tune_gain(targets: Sequence[Target], gains: Sequence[float], params: ILCParams, controller: ControllerParams,

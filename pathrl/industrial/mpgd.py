@@ -33,7 +33,7 @@ from pathrl.industrial.metrics import POS_SPEC_MM, Errors, evaluate, position_er
 from pathrl.industrial.program import Program
 from pathrl.industrial.trajectories import Target, waypoint_indices
 
-__all__ = ["IWAResult", "MPGDParams", "error_peaks", "mpgd_update", "peak_step", "run_mpgd"]
+__all__ = ["IWAResult", "MPGDParams", "error_peaks", "iterate_waypoints", "mpgd_update", "peak_step", "run_mpgd"]
 
 
 @dataclass(frozen=True)
@@ -118,22 +118,21 @@ def mpgd_update(program: Program, ex: Execution, target: Target, psi: np.ndarray
     return program.with_positions(program.positions + steps)
 
 
-def run_mpgd(target: Target, program: Program, v: float, params: MPGDParams | None = None,
-             controller: ControllerParams | None = None, seed: int = 0,
-             on_execution: Callable[[int, Program, Execution], None] | None = None) -> IWAResult:
-    """IWA with MPGD from `program` at speed command `v` mm/s; stops at the 0.5 mm spec or after k_max
-    adjustments (k_max + 1 executions at most). `on_execution(k, program, execution)` sees every execution (a
-    recorder; it runs inside the timed loop)."""
-    params = MPGDParams() if params is None else params
-    controller = ControllerParams() if controller is None else controller
-    psi = waypoint_indices(len(target.p), len(program.positions))
+def iterate_waypoints(target: Target, program: Program, v: float, controller: ControllerParams, seed: int,
+                      k_max: int, update: Callable[[int, Program, Execution], Program],
+                      on_execution: Callable[[int, Program, Execution], None] | None = None) -> IWAResult:
+    """The iterative waypoint adjustment loop shared by MPGD and ILC: execute `program` at speed command `v` mm/s
+    (execution k with seed + k), keep the best, stop at the 0.5 mm spec or after `k_max` adjustments, else
+    ``program = update(k, program, execution)``. An adjusted program out of the arm's reach or axis ranges ends the
+    loop with the best so far (the first program's is an error). `on_execution(k, program, execution)` sees every
+    execution (a recorder; it runs inside the timed loop)."""
     t0 = time.perf_counter()
     best: IWAResult | None = None
     history: list[float] = []
-    for k in range(params.k_max + 1):
+    for k in range(k_max + 1):
         try:
             ex = execute(program, v, controller, seed=seed + k)
-        except ValueError:  # the adjusted program left the arm's reach or axis ranges: keep the best so far
+        except ValueError:
             if best is None:
                 raise
             break
@@ -146,8 +145,20 @@ def run_mpgd(target: Target, program: Program, v: float, params: MPGDParams | No
         if errs.max_pos_mm <= POS_SPEC_MM:
             best.iterations_to_spec = k
             break
-        if k < params.k_max:
-            program = mpgd_update(program, ex, target, psi, params)
+        if k < k_max:
+            program = update(k, program, ex)
     assert best is not None
     best.history, best.executions, best.t_opt = history, len(history), time.perf_counter() - t0
     return best
+
+
+def run_mpgd(target: Target, program: Program, v: float, params: MPGDParams | None = None,
+             controller: ControllerParams | None = None, seed: int = 0,
+             on_execution: Callable[[int, Program, Execution], None] | None = None) -> IWAResult:
+    """IWA with MPGD from `program` at speed command `v` mm/s (:func:`iterate_waypoints`; k_max + 1 executions at
+    most)."""
+    params = MPGDParams() if params is None else params
+    controller = ControllerParams() if controller is None else controller
+    psi = waypoint_indices(len(target.p), len(program.positions))
+    return iterate_waypoints(target, program, v, controller, seed, params.k_max,
+                             lambda _k, prog, ex: mpgd_update(prog, ex, target, psi, params), on_execution)
