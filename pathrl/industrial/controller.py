@@ -52,10 +52,10 @@ from scipy.signal import bilinear, lfilter
 
 from pathrl.industrial import arm
 from pathrl.industrial.drives import DriveParams
-from pathrl.industrial.planner import CornerEvent, PlannerParams
+from pathrl.industrial.planner import CornerEvent, PlannerParams, lookahead
 from pathrl.industrial.program import PathSamples, Program, sample_path
 
-__all__ = ["ControllerParams", "Execution", "execute", "lookahead", "servo", "speed_limit", "time_law"]
+__all__ = ["ControllerParams", "Execution", "execute", "servo", "speed_limit", "time_law"]
 
 
 @dataclass(frozen=True)
@@ -118,19 +118,6 @@ def speed_limit(path: PathSamples, v: float, params: ControllerParams) -> tuple[
     w = np.minimum(w, params.tcp_acc / np.maximum(kappa, tiny))
     acc = np.minimum(params.tcp_acc, np.min(params.beta * arm.ACC_LIMITS / np.maximum(np.abs(qs), tiny), axis=1))
     return w, acc
-
-
-def lookahead(s: np.ndarray, w_max: np.ndarray, acc: np.ndarray) -> np.ndarray:
-    """Path speed (K,) mm/s over arc length s (K,): rest to rest, below sqrt(w_max), path acceleration and
-    deceleration at most `acc` (K,). Forward and backward running minima over sdot^2."""
-    w = w_max.copy()
-    w[0] = w[-1] = 0.0
-    budget = np.r_[0.0, np.cumsum(2.0 * acc[:-1] * np.diff(s))]
-    w = np.minimum(w, budget + np.minimum.accumulate(w - budget))
-    back = np.r_[0.0, np.cumsum(2.0 * acc[::-1][:-1] * -np.diff(s[::-1]))]
-    w_rev = w[::-1]
-    w = np.minimum(w_rev, back + np.minimum.accumulate(w_rev - back))[::-1]
-    return np.sqrt(np.maximum(w, 0.0))
 
 
 def time_law(s: np.ndarray, sdot: np.ndarray, params: ControllerParams) -> np.ndarray:

@@ -38,8 +38,8 @@ from scipy.spatial.transform import Rotation
 from pathrl.industrial import arm
 from pathrl.industrial.program import DEFAULT_SEED, Program, blend_polyline
 
-__all__ = ["CornerEvent", "Plan", "PlannerParams", "blend_orientations", "moving_average", "plan", "plan_zones",
-           "speed_profile"]
+__all__ = ["CornerEvent", "Plan", "PlannerParams", "blend_orientations", "lookahead", "moving_average", "plan",
+           "plan_zones", "speed_profile"]
 
 DEG = np.pi / 180.0
 
@@ -177,6 +177,19 @@ def _half_segments(cum: np.ndarray) -> np.ndarray:
     return out
 
 
+def lookahead(s: np.ndarray, w_max: np.ndarray, acc: np.ndarray) -> np.ndarray:
+    """Path speed (K,) mm/s over arc length s (K,): rest to rest, below sqrt(w_max), path acceleration and
+    deceleration at most `acc` (K,). Forward and backward running minima over sdot^2."""
+    w = w_max.copy()
+    w[0] = w[-1] = 0.0
+    budget = np.r_[0.0, np.cumsum(2.0 * acc[:-1] * np.diff(s))]
+    w = np.minimum(w, budget + np.minimum.accumulate(w - budget))
+    back = np.r_[0.0, np.cumsum(2.0 * acc[::-1][:-1] * -np.diff(s[::-1]))]
+    w_rev = w[::-1]
+    w = np.minimum(w_rev, back + np.minimum.accumulate(w_rev - back))[::-1]
+    return np.sqrt(np.maximum(w, 0.0))
+
+
 def speed_profile(s: np.ndarray, q: np.ndarray, p: np.ndarray, v: float, s_stop: np.ndarray, horizon: np.ndarray,
                   params: PlannerParams) -> np.ndarray:
     """Path speed (K,) mm/s along arc length s (K,) of joints q (K, 6) and TCP p (K, 3): the module doc's step 3.
@@ -193,13 +206,7 @@ def speed_profile(s: np.ndarray, q: np.ndarray, p: np.ndarray, v: float, s_stop:
     acc = np.minimum(params.tcp_acc, np.min(params.beta * amax / np.maximum(np.abs(qs), tiny), axis=1))
     w = np.minimum(w, 2.0 * params.tcp_acc * np.maximum(horizon - s, 0.0))
     w[np.searchsorted(s, s_stop).clip(0, len(s) - 1)] = 0.0
-    w[0] = w[-1] = 0.0
-    budget = np.r_[0.0, np.cumsum(2.0 * acc[:-1] * np.diff(s))]
-    w = np.minimum(w, budget + np.minimum.accumulate(w - budget))
-    back = np.r_[0.0, np.cumsum(2.0 * acc[::-1][:-1] * -np.diff(s[::-1]))]
-    w_rev = w[::-1]
-    w = np.minimum(w_rev, back + np.minimum.accumulate(w_rev - back))[::-1]
-    return np.sqrt(np.maximum(w, 0.0))
+    return lookahead(s, w, acc)
 
 
 def moving_average(x: np.ndarray, n: int) -> np.ndarray:
