@@ -12,6 +12,8 @@ import json
 import sys
 from pathlib import Path
 
+from pathrl.repro.render import time_out_pct
+
 ROOT = Path(__file__).resolve().parents[1]
 DIR = ROOT / "results" / "your_robot"
 #: The issue's bars for a student trained in <= 15 min: duration / TOPP-RA and mean Cartesian deviation.
@@ -29,7 +31,7 @@ def rows(folder: Path) -> list[dict[str, float | str | int]]:
         out.append({"robot": robot, "episodes": m["episodes"], "duration_s": m["duration_s"],
                     "toppra_s": tp["toppra_duration_s"], "ratio": m["duration_s"] / tp["toppra_duration_s"],
                     "cm": m["cart_pos_dev_mean_cm"], "cm_max": m["cart_pos_dev_max_cm"],
-                    "timeouts": 100.0 * sum(p["termination"] == "time_out" for p in m["per_episode"]) / m["episodes"],
+                    "timeouts": time_out_pct(m),
                     "violations": m["limit_violations"], "minutes": tr["wall_time_s"] / 60.0,
                     "iterations": tr["iterations"], "env_steps_m": tr["env_steps"] / 1e6})
     return out
