@@ -146,3 +146,37 @@ def test_target_point_bad_params(tmp_path, params, msg):
         generate_dataset(robot_cfg("iiwa7"), dataset_cfg("target_point", **params), dest=tmp_path / "x",
                          progress=False)
     assert not (tmp_path / "x").exists()
+
+
+def test_action_smoothing_range_is_checked():
+    assert resolve_params("random", "iiwa7", {"action_smoothing": [0.0, 0.995]})["action_smoothing"] == [0.0, 0.995]
+    for bad in (1.0, -0.1, [0.5, 0.2], [0.1, 0.2, 0.3], "x"):
+        with pytest.raises(DatasetError, match="action_smoothing"):
+            resolve_params("random", "iiwa7", {"action_smoothing": bad})
+
+
+def test_draw_smoothing_is_log_uniform_in_one_minus_rho():
+    """1 - rho log-uniform on [1 - hi, 1 - lo]: inside the range, median sqrt((1 - lo)(1 - hi)), each decade of the
+    correlation time equally common."""
+    from pathrl.datagen.generators.random import draw_smoothing
+
+    rho = draw_smoothing(0.0, 0.99, 200_000, torch.Generator().manual_seed(0)).squeeze(1)
+    assert rho.shape == (200_000,) and rho.min() >= 0.0 and rho.max() <= 0.99
+    assert abs(float((1 - rho).median()) - 0.1) < 0.002  # sqrt(1 * 0.01)
+    assert abs(float((rho < 0.9).double().mean()) - 0.5) < 0.005  # 1 - rho in [0.1, 1]: one of two decades
+
+
+def test_broad_random_paths_are_straighter(tmp_path, checker):
+    """Actions smoothed near rho = 1 make long straight-ish sweeps: wider curvature-knot gaps than independent
+    actions on the same seeds, and the paths still keep the limits and avoid collisions."""
+    spec = load_robot_by_name("iiwa7")
+    ks = KnotStrategy(strategy="curvature", spacing=0.3, base_spacing=0.1, n_state=9)
+    widest = {}
+    for name, rho in (("independent", 0.0), ("smooth", [0.99, 0.995])):
+        cfg = dataset_cfg("random", length_range=[6.0, 7.0], action_smoothing=rho)
+        generate_dataset(robot_cfg("iiwa7"), cfg, dest=tmp_path / name, progress=False)
+        _check_paths(load_dataset(tmp_path / name, spec), spec, checker, 6.0, 7.0)
+        ps = load_pathset(tmp_path / name, "train", ks)
+        gaps = [np.linalg.norm(np.diff(k[:n], axis=0), axis=1) for k, n in zip(ps.knots.numpy(), ps.num_knots.tolist())]
+        widest[name] = float(np.quantile(np.concatenate(gaps), 0.9))
+    assert widest["smooth"] > 1.3 * widest["independent"], widest

@@ -8,12 +8,12 @@ docs/datasets.md.
 from __future__ import annotations
 
 import copy
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 from pathrl.dataset.io import DatasetError
 
-__all__ = ["APPROACHES", "DEFAULT_PARAMS", "KINDS", "resolve_params"]
+__all__ = ["APPROACHES", "DEFAULT_PARAMS", "KINDS", "resolve_params", "smoothing_range"]
 
 KINDS = ("random", "target_point", "ball_balancing")
 APPROACHES = ("saturated", "pursuit", "pd")  # target_point motion toward each goal
@@ -76,6 +76,18 @@ DEFAULT_PARAMS: dict[str, dict[str, Any]] = {
     },
 }
 
+def smoothing_range(value: float | Sequence[float]) -> tuple[float, float]:
+    """``action_smoothing`` as (min, max): a number rho is (rho, rho); a [min, max] pair is drawn from per candidate.
+
+    Raises DatasetError unless 0 <= min <= max < 1.
+    """
+    try:
+        lo, hi = (float(value), float(value)) if not isinstance(value, Sequence) else (float(x) for x in value)
+    except (TypeError, ValueError):
+        raise DatasetError(f"dataset.params.action_smoothing: expected rho or [min, max], got {value!r}") from None
+    if not 0.0 <= lo <= hi < 1.0:
+        raise DatasetError(f"dataset.params.action_smoothing: need 0 <= min <= max < 1, got [{lo}, {hi}]")
+    return lo, hi
 
 
 def resolve_params(kind: str, robot_name: str, params: Mapping[str, Any] | None) -> dict[str, Any]:
@@ -103,6 +115,8 @@ def resolve_params(kind: str, robot_name: str, params: Mapping[str, Any] | None)
             raise DatasetError(f"dataset.params.{key} must be >= 1, got {out[key]}")
     if "approach" in out and out["approach"] not in APPROACHES:
         raise DatasetError(f"dataset.params.approach: expected one of {list(APPROACHES)}, got {out['approach']!r}")
+    if "action_smoothing" in out:
+        smoothing_range(out["action_smoothing"])
     for key in ("cruise", "gain"):
         if key in out and not float(out[key]) > 0:
             raise DatasetError(f"dataset.params.{key} must be > 0, got {out[key]}")

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from typing import Any
 
@@ -10,19 +9,31 @@ import numpy as np
 import torch
 
 from pathrl.datagen.generators.context import GeneratorContext
+from pathrl.datagen.generators.defaults import smoothing_range
 from pathrl.datagen.generators.rollout import stored_rollout_paths
 from pathrl.robot.model import RobotSpec
 
-__all__ = ["KIND", "check_robot", "stored_paths"]
+__all__ = ["KIND", "check_robot", "draw_smoothing", "stored_paths"]
 
 KIND = "random"
 
 
+def draw_smoothing(lo: float, hi: float, n: int, tgen: torch.Generator) -> torch.Tensor:
+    """(n, 1) AR(1) coefficients rho in [lo, hi] with 1 - rho log-uniform: the actions' correlation time
+    dt / (1 - rho) is log-uniform, so every time scale between dt / (1 - lo) and dt / (1 - hi) is equally common."""
+    u = torch.rand(n, 1, generator=tgen, dtype=torch.float64)
+    return 1.0 - (1.0 - lo) * ((1.0 - hi) / (1.0 - lo)) ** u
+
+
 class _RandomPolicy:
-    """Uniform random actions, optionally AR(1)-smoothed; a checkpoint every ``checkpoint_steps`` steps."""
+    """Uniform random actions, optionally AR(1)-smoothed (one coefficient per candidate, :func:`draw_smoothing` when
+    ``action_smoothing`` is a range); a checkpoint every ``checkpoint_steps`` steps."""
 
     def __init__(self, ctx: GeneratorContext, p: Mapping[str, Any], n: int, tgen: torch.Generator):
-        self.rho = float(p["action_smoothing"])
+        lo, hi = smoothing_range(p["action_smoothing"])
+        self.rho = None if hi == 0 else torch.full((n, 1), lo, dtype=torch.float64)  # (n, 1); None: independent
+        if hi > lo:  # a fixed rho draws nothing: the stream of a fixed-rho dataset is unchanged
+            self.rho = draw_smoothing(lo, hi, n, tgen)
         self.ck_steps = int(p["checkpoint_steps"])
         self.tgen = tgen
         self.prev = torch.zeros(n, ctx.spec.dof, dtype=torch.float64)
@@ -32,8 +43,9 @@ class _RandomPolicy:
 
     def action(self, rows, p, v, a, a_min, a_max) -> torch.Tensor:
         u = torch.rand(a_min.shape, generator=self.tgen, dtype=torch.float64) * 2.0 - 1.0
-        if self.rho > 0:
-            u = (self.rho * self.prev[rows] + math.sqrt(1.0 - self.rho**2) * u).clamp(-1.0, 1.0)
+        if self.rho is not None:
+            rho = self.rho[rows]
+            u = (rho * self.prev[rows] + torch.sqrt(1.0 - rho**2) * u).clamp(-1.0, 1.0)
             self.prev[rows] = u
         return u
 
