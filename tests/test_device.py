@@ -82,6 +82,17 @@ def test_pybullet_feedback_is_refused_off_the_cpu_before_any_scene_is_built():
         make_feedback(cfg, load_robot_by_name("iiwa7"), 2, 0, device="cuda")
 
 
+def test_a_trueadapt_env_in_pybullet_is_refused_off_the_cpu_before_its_data_is_read(tmp_path):
+    from pathrl.envs.trueadapt import build_trueadapt_env
+    from pathrl.repro import trueadapt as adapt
+    from pathrl.runs import load_run
+
+    cfg = load_run(ROOT / "models" / adapt.REALTIME_MODEL)[0]
+    cfg["task"] = {**cfg["task"], "backend": "pybullet"}
+    with pytest.raises(DeviceError, match="simulates in PyBullet, on the CPU only"):
+        build_trueadapt_env(cfg, "test", 2, str(tmp_path / "no_dataset"), 0, device="cuda")
+
+
 def test_same_device():
     assert same_device("cpu", torch.device("cpu")) and not same_device("cpu", "meta")
     assert not same_device(torch.device("cpu"), "cuda:0")
@@ -167,6 +178,42 @@ def test_controller_state_goes_to_the_controllers_device():
         wrapper.load_state_dict({"controller": {"nope": torch.ones(1)}, "label": None})
 
 
+def test_a_cuda_runs_checkpoint_resumes_onto_its_device(dataset, tmp_path, monkeypatch):
+    """PathRLRunner.save and restore_streams of a run on ``cuda:0`` (the env and the teacher's plan standing on
+    ``meta``): the CUDA random state is saved and set again, and the env's tensors, dicts of tensors, ball and the
+    controller's plan and label, loaded to the CPU, all land back on the env's device."""
+    from pathrl.runs import make_controller
+    from pathrl.storage import load_checkpoint
+    from pathrl.train.distill import TeacherLabels
+    from pathrl.train.runner import PathRLRunner
+
+    cfg, _ = dc.model_cfg(MODEL)
+    env = make_env(cfg, "train", num_envs=4, dataset_path=str(dataset), backend="analytic")
+    wrapper = TeacherLabels(env, make_controller(cfg["teacher"], env))
+    wrapper.get_observations()
+    wrapper.step(torch.zeros(env.num_envs, env.num_actions))  # a plan in progress, a label of the new state
+    rng_cuda, set_calls = torch.arange(16, dtype=torch.uint8), []
+    monkeypatch.setattr(torch.cuda, "get_rng_state", lambda device="cuda": rng_cuda.clone())
+    monkeypatch.setattr(torch.cuda, "set_rng_state", lambda state, device="cuda": set_calls.append((state, device)))
+    logger = SimpleNamespace(writer=None, save_model=lambda path, it: None)
+    runner = SimpleNamespace(env=wrapper, device="cuda:0", logger=logger, _summary=None, current_learning_iteration=3,
+                             alg=SimpleNamespace(save=lambda: {"student_state_dict": {}}))
+    PathRLRunner.save(runner, str(tmp_path / "model_3.pt"))
+    loaded = load_checkpoint(tmp_path / "model_3.pt")
+    assert torch.equal(loaded["rng_cuda"], rng_cuda) and loaded["controller_state"]["label"] is not None
+
+    _to_meta(wrapper, loaded["env_state"])  # the snapshot of the wrapper: its env, the env's parts, the label
+    controller = wrapper.controller
+    for name in loaded["controller_state"]["controller"]:
+        setattr(controller, name, getattr(controller, name).to("meta"))
+    assert PathRLRunner.restore_streams(runner, loaded)  # the analytic ball: an exact resume
+    assert len(set_calls) == 1 and torch.equal(set_calls[0][0], rng_cuda) and set_calls[0][1] == "cuda:0"
+    entries = dict(_captured(wrapper, loaded["env_state"]))
+    entries.update({f"controller.{n}": getattr(controller, n) for n in loaded["controller_state"]["controller"]})
+    entries["label"] = wrapper._label
+    assert len(entries) > 20 and {n for n, t in entries.items() if t.device.type != "meta"} == set()
+
+
 # ------------------------------------------------------------------------------------------- start-up lines
 def test_native_kernels_off_on_a_gpu_is_said_once():
     assert native_note("cpu", True, True) is None and native_note("cuda", False, True) is None
@@ -242,12 +289,41 @@ def test_cli_device_check_does_not_need_cuda_for_a_cpu_run():
 
 
 # ------------------------------------------------------------------------------------------- evaluation device
+def _save_as_on_cuda(state: dict, path: Path) -> None:
+    """:func:`~pathrl.storage.save_checkpoint` of `state` with every tensor tagged ``cuda:0`` in the file, as a GPU
+    run writes it: a plain ``torch.load`` restores such tensors onto CUDA (and fails where there is none)."""
+    from pathrl.storage import save_checkpoint
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(torch.serialization, "location_tag", lambda storage: "cuda:0")
+        save_checkpoint(state, path)
+
+
 def _gpu_trained(model: Path, dest: Path) -> Path:
-    """A copy of `model` whose config says it was trained on ``cuda`` (as a GPU run's does)."""
+    """A copy of `model` as a GPU run ships it: its config says ``cuda``, its checkpoint's tensors are CUDA's."""
+    from pathrl.storage import load_checkpoint
+
     shutil.copytree(model, dest)
     cfg = yaml.safe_load((dest / "config.yaml").read_text())
     (dest / "config.yaml").write_text(yaml.safe_dump({**cfg, "device": "cuda"}, sort_keys=False))
+    _save_as_on_cuda(load_checkpoint(model / "model.pt"), dest / "model.pt")
     return dest
+
+
+def test_a_checkpoint_written_on_a_gpu_loads_on_the_cpu(tmp_path):
+    """The simulation is faithful (without CUDA a plain load fails), and every pathrl loader maps to the CPU."""
+    from pathrl.storage import load_checkpoint
+    from pathrl.train.runner import PathRLRunner
+
+    path = _gpu_trained(MODEL, tmp_path / "m") / "model.pt"
+    if not torch.cuda.is_available():
+        with pytest.raises(RuntimeError, match="CUDA"):
+            torch.load(path, weights_only=True)
+    loaded = load_checkpoint(path)
+    weights = [t for k, v in loaded.items() if k.endswith("_state_dict") for t in v.values()]
+    assert weights and {t.device.type for t in weights} == {"cpu"}
+    runner = SimpleNamespace(load_state=lambda state, load_cfg, strict: state)  # what PathRLRunner.load hands on
+    assert PathRLRunner.load(runner, str(path))["student_state_dict"].keys() == loaded["student_state_dict"].keys()
 
 
 def test_a_gpu_trained_run_evaluates_on_the_evaluation_device(dataset, tmp_path):
@@ -310,6 +386,13 @@ def test_gpu_check_dry_run_from_a_bare_copy(tmp_path):
     assert report["dataset"].startswith("generated") and all(report["passed"].values()) and len(report["passed"]) >= 5
     assert {(r["device"], r["num_envs"]) for r in report["bench"]["env_steps"]} == {(d, 64) for d in DEVICES}
     assert {r["device"] for r in report["bench"]["ppo_iteration"]} == set(DEVICES)
+
+
+def test_gpu_check_measures_the_issues_sizes_within_its_budget():
+    """What a full (not --dry-run) check measures: env steps/s at 4096 and 65 536 envs, a PPO iteration at 4096."""
+    gpu_check = _gpu_check()
+    full = gpu_check.SIZES["full"]
+    assert full["bench_envs"] == (4096, 65536) and full["ppo_envs"] == 4096 and gpu_check.BUDGET_S == 300.0
 
 
 def _gpu_check():

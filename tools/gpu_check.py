@@ -1,11 +1,11 @@
-"""GPU check: does pathrl train on this machine's GPU, correctly and how fast? One script, about 5 minutes on one GPU.
+"""GPU check: does pathrl train on this machine's GPU, correctly and how fast? One script, a 5-minute budget on one GPU.
 
     python tools/gpu_check.py --install --model models/iiwa7_ball_balancing_distill   # first run on a GPU machine
     python tools/gpu_check.py --model DIR [--dataset DIR] [--out bench/gpu.json]
     python tools/gpu_check.py --dry-run --model DIR                                    # the whole flow, CPU, tiny
     python tools/gpu_check.py --pack gpu_check.tar.gz --model DIR    # the copy to ship to a GPU machine, and stop
 
-It needs only a copy of ``pathrl/``, ``conf/``, ``pyproject.toml``, this file and one shipped model (about 5 MB; not
+It needs only a copy of ``pathrl/``, ``conf/``, ``pyproject.toml``, this file and one shipped model (about 2 MB; not
 the checkout's ``datasets/``, ``results/`` or other models): the package is imported from the copy this file sits in.
 ``--install`` first installs torch 2.13.0 built for CUDA (``--cuda``, default cu126, from the PyTorch index) and
 pathrl's other dependencies from ``pyproject.toml``. Without ``--dataset`` a tiny synthetic dataset of the model's

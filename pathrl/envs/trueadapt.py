@@ -421,19 +421,18 @@ def build_trueadapt_env(cfg: dict, split: str = "train", num_envs: int | None = 
     from dataclasses import replace
 
     from pathrl.dataset.trueadapt import load_trajectories
+    from pathrl.envs.device import check_run_device
     from pathrl.envs.trueadapt_rewards import build_adapt_reward
     from pathrl.robot.model import load_robot
 
     check_adapt_cfg(cfg)
     env_cfg = replace(adapt_cfg_from(cfg, num_envs, seed), **overrides)
+    check_run_device({"device": env_cfg.device, "task": cfg["task"]})  # before any data is read; PyBullet: the CPU
     robot = load_robot(cfg["robot"])
     bank = load_trajectories(dataset_path or cfg["dataset"]["path"], split, robot, env_cfg.dt)
     ball = None
     if cfg["task"]["backend"] == "pybullet":
-        from pathrl.envs.device import check_run_device
         from pathrl.sim.vec import PyBulletBall
-
-        check_run_device({"device": env_cfg.device, "task": cfg["task"]})  # PyBullet: the CPU only
 
         ball = PyBulletBall(robot, env_cfg.num_envs, env_cfg.control_rate, seed=env_cfg.seed + 1,
                             workers=int(cfg["task"].get("workers", 2)))

@@ -201,8 +201,9 @@ class PathRLRunner(OnPolicyRunner):
         self.logger.save_model(path, self.current_learning_iteration)
 
     def load(self, path: str, load_cfg: dict | None = None, strict: bool = True,
-             map_location: str | None = None) -> dict:
-        """Load the verified checkpoint at `path` (weights only) into the runner; see :meth:`load_state`."""
+             map_location: str | None = "cpu") -> dict:
+        """Load the verified checkpoint at `path` (weights only) into the runner; see :meth:`load_state`. It loads
+        to the CPU by default, so a GPU run's checkpoint loads without CUDA (the weights go to the runner's device)."""
         return self.load_state(load_checkpoint(Path(path), map_location=map_location), load_cfg, strict)
 
     def load_state(self, loaded: dict, load_cfg: dict | None = None, strict: bool = True) -> dict:
