@@ -159,6 +159,7 @@ ROWS: tuple[AdaptRow, ...] = (
              AdaptEval("on_plate", "iiwa7_trueadapt_on_plate_distill_f10")),
     AdaptRow("on_plate/no_jerk_penalty", "on plate: no jerk penalty", _PPO + " without the jerk penalty",
              AdaptEval("on_plate", PPO + "_no_jerk")),
+    _scratch_row("no_jerk_penalty", "no jerk penalty", "no_jerk_penalty"),
     AdaptRow("on_plate/no_acceleration_penalty", "on plate: no acceleration penalty",
              _PPO + " without the acceleration penalty", AdaptEval("on_plate", PPO + "_no_acceleration")),
     _scratch_row("no_acceleration_penalty", "no acceleration penalty", "no_acc_penalty"),
