@@ -31,7 +31,7 @@ from pathrl.paths.knots import KnotStrategy
 from pathrl.paths.segments import evaluation_plan
 from pathrl.robot.kinematics import ForwardKinematics
 from pathrl.robot.model import load_robot
-from pathrl.runs import load_policy, load_run, make_controller
+from pathrl.runs import load_policy, load_run, make_controller, policy_scale
 
 ANKLE_HEIGHT = BalanceCfg.ankle_height  # m, ankle joints above the floor (the ZMP lies on the floor)
 
@@ -102,7 +102,8 @@ def study(run_dir: str, dataset: str, episodes: int, out: str, controller: dict 
     plan = type(plan)(*(getattr(plan, f)[ids] for f in ("path", "start_s", "end_s", "end_knot")))
     episodes = len(ids)
     n = min(PYBULLET_ENVS, episodes)
-    env = make_env(cfg, "test", num_envs=n, seed=0, knot_gap_norm=summary["knot_gap_norm"], paths=paths, robot=robot,
+    gap = summary.get("knot_gap_norm") if controller else policy_scale(Path(run_dir), summary)  # RunError without it
+    env = make_env(cfg, "test", num_envs=n, seed=0, knot_gap_norm=gap, paths=paths, robot=robot,
                    backend="pybullet", **EVAL_ENV)
     try:
         policy = make_controller(controller, env) if controller else load_policy(cfg, env, ckpt)

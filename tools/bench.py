@@ -371,6 +371,9 @@ def main() -> None:
     ap.add_argument("--follower-only", action="store_true",
                     help="only the follower: latency (decide, replace_path) and every test path to its end at "
                          "100, 240 and 500 Hz; merged into --out")
+    ap.add_argument("--follower-fuzz-only", action="store_true",
+                    help="only the follower fuzz (adversarial paths, path changes, stops, measured states; "
+                         "pathrl.deploy.fuzz), with the load average in its entry; merged into --out")
     args = ap.parse_args()
     torch.set_num_threads(1)
     quick = args.quick
@@ -381,12 +384,15 @@ def main() -> None:
         ap.error(f"--limits: expected a comma-separated subset of native,torch,eager, got {args.limits!r}")
     res = {"machine": {"cpus": os.cpu_count(), "platform": platform.platform(), "torch": torch.__version__,
                        "native_limits": native.available(), "load_avg_start": _load()}}
+    if args.follower_fuzz_only:
+        fuzz = {"follower_fuzz_iiwa7_random": _follower_fuzz(quick)}
+        _merge(Path(args.out), fuzz)
+        _print_follower({**res, **fuzz})
+        return
     if args.follower_only:
         _follower_benches(res, quick)
         res["machine"]["load_avg_end"] = _load()
-        out = Path(args.out)
-        old = json.loads(out.read_text()) if out.is_file() else {}
-        write_json_atomic(out, {**old, **res})
+        _merge(Path(args.out), res)
         _print_follower(res)
         return
     suffix = {"native": "", "torch": "_torch", "eager": "_eager"}
@@ -472,9 +478,21 @@ def _follower_benches(res: dict, quick: bool) -> None:
         for model, dataset in FOLLOWER_END:
             for rate in (100, 240, 500):
                 res[f"follower_end_{Path(model).name}_{rate}hz"] = bench_follower_end(model, dataset, rate)
-    # the follower under adversarial paths, path changes, stops and bad measured states (pathrl.deploy.fuzz)
+    res["follower_fuzz_iiwa7_random"] = _follower_fuzz(quick)
+
+
+def _follower_fuzz(quick: bool) -> dict:
+    """The follower under adversarial paths, path changes, stops and measured states (pathrl.deploy.fuzz), 300 trials
+    (10 with `quick`), with the load average at its start and end (its time depends on it)."""
+    start = _load()
     fuzz = fuzz_follower(ROOT / "models" / "iiwa7_random", 10 if quick else 300)
-    res["follower_fuzz_iiwa7_random"] = {**asdict(fuzz), "model": "models/iiwa7_random"}
+    return {**asdict(fuzz), "model": "models/iiwa7_random", "load_avg": [start, _load()]}
+
+
+def _merge(out: Path, res: dict) -> None:
+    """Write `res` into the JSON file `out`, keeping its other entries (atomic)."""
+    old = json.loads(out.read_text()) if out.is_file() else {}
+    write_json_atomic(out, {**old, **res})
 
 
 def _print_follower(res: dict) -> None:
@@ -509,8 +527,10 @@ def _follower_rows(t, res: dict) -> None:
     f = res.get("follower_fuzz_iiwa7_random")
     if f:
         t.add_row(f"Follower fuzz, {Path(f['model']).name}: {f['trials']} adversarial paths ({f['refused']} refused "
-                  f"unclipped, all followed clipped), {f['path_changes']} path changes, {f['stops']} stops, "
-                  f"{f['bad_states_refused']} bad states refused, {f['crashes']} crashes",
+                  f"unclipped, all followed clipped), {f['path_changes']} path changes "
+                  f"({f.get('path_changes_refused', 0)} refused), {f['stops']} stops, {f['bad_states_refused']} bad "
+                  f"states refused, {f.get('measured_states', 0)} measured states ({f.get('measured_refused', 0)} "
+                  f"refused, {f.get('measured_mishandled', 0)} mishandled), {f['crashes']} crashes",
                   f"{f['violations']} violations in {f['setpoints_checked']:,} setpoint values")
 
 

@@ -31,6 +31,7 @@ import numpy as np
 import torch
 
 from pathrl.dataset.io import OUT_OF_LIMITS
+from pathrl.dataset.kiemel import MAX_COEFF_RAD, MAX_PATH_LENGTH_RAD
 from pathrl.deploy.approach import Approach, plan_approach
 from pathrl.envs.registry import EVAL_ENV, get_task
 from pathrl.envs.rewards import build_reward_terms
@@ -44,10 +45,10 @@ from pathrl.paths.pathset import PathSet
 from pathrl.paths.quick import quick_knots, quick_pathset
 from pathrl.paths.segments import full_segments
 from pathrl.robot.model import RobotSpec, load_robot
-from pathrl.runs import load_policy, load_run
+from pathrl.runs import RunError, load_policy, load_run, policy_scale
 
-__all__ = ["MEASURED_TOLERANCE", "ON_MEASURED", "SETTLE_TOLERANCE", "START_TOLERANCE", "Follower", "FollowerError",
-           "PreparedPath", "Setpoints"]
+__all__ = ["MAX_KNOT_RAD", "MAX_PATH_RAD", "MEASURED_TOLERANCE", "ON_MEASURED", "SETTLE_TOLERANCE", "START_TOLERANCE",
+           "Follower", "FollowerError", "PreparedPath", "Setpoints"]
 
 
 #: Largest weighted joint distance (rad) between the robot and the start of a path it is asked to follow.
@@ -60,6 +61,9 @@ TAKEOVER_ARC = 0.25
 MEASURED_TOLERANCE = 0.05
 #: What ``decide(q_measured=...)`` does beyond the tolerance: raise a FollowerError (nothing moves) or warn.
 ON_MEASURED = ("refuse", "warn")
+#: Largest |knot| (rad) and knot polyline length (rad) of a path, checked before it is tabulated: the dataset
+#: import's bounds, far beyond any joint range; knots in degrees or mm would take seconds to minutes and gigabytes.
+MAX_KNOT_RAD, MAX_PATH_RAD = MAX_COEFF_RAD, MAX_PATH_LENGTH_RAD
 
 
 class FollowerError(ValueError):
@@ -101,8 +105,8 @@ class Follower:
             raise FollowerError(f"out_of_limits must be one of {list(OUT_OF_LIMITS)}, got {out_of_limits!r}")
         if on_measured not in ON_MEASURED:
             raise FollowerError(f"on_measured must be one of {list(ON_MEASURED)}, got {on_measured!r}")
-        if not measured_tolerance > 0:
-            raise FollowerError(f"measured_tolerance must be > 0 rad, got {measured_tolerance}")
+        if not _number(measured_tolerance) > 0:
+            raise FollowerError(f"measured_tolerance must be a number > 0 (rad), got {measured_tolerance!r}")
         try:
             feedback = get_task(cfg).feedback
         except ValueError as exc:
@@ -122,8 +126,9 @@ class Follower:
         self.measured_tolerance, self.on_measured = float(measured_tolerance), on_measured
         #: Largest joint difference (rad) between the last measured position and the commanded one (or None).
         self.measured_error: float | None = None
-        self.control_rate = float(self.env_cfg.control_rate if control_rate is None else control_rate)
-        self.setpoints_per_decision = self._ticks(self.control_rate)
+        rate = self.env_cfg.control_rate if control_rate is None else control_rate
+        self.setpoints_per_decision = self._ticks(rate)  # a FollowerError unless a whole number per decision
+        self.control_rate = float(rate)
         self._lim = (robot.vel_limits, robot.acc_limits, robot.jerk_limits, robot.pos_limits)
 
     @classmethod
@@ -134,22 +139,20 @@ class Follower:
         `control_rate` (Hz): the default rate of :meth:`decide`'s setpoints (default: the env's, 240 Hz); it must
         give a whole number of setpoints per decision (e.g. 100, 240, 250, 500, 1000 Hz for 0.1 s).
         `measured_tolerance` (rad) and `on_measured` ("refuse" or "warn"): see :meth:`decide`."""
-        from pathrl.runs import RunError
-
+        if not isinstance(model_dir, (str, os.PathLike)):
+            raise FollowerError(f"model_dir must be a path (str or os.PathLike), got {type(model_dir).__name__}")
         try:
             cfg, ckpt, summary = load_run(Path(model_dir))
+            if ckpt is None:
+                raise FollowerError(f"{model_dir}: a model-based controller, not a policy")
+            gap = policy_scale(Path(model_dir), summary)
         except RunError as exc:
             raise FollowerError(str(exc)) from None
-        if ckpt is None:
-            raise FollowerError(f"{model_dir}: a model-based controller, not a policy")
-        if "knot_gap_norm" not in summary:
-            raise FollowerError(f"{model_dir}/summary.json: no knot_gap_norm (the state's length scale)")
         try:
             robot = load_robot(cfg["robot"])
         except (KeyError, TypeError, ValueError) as exc:
             raise FollowerError(f"{model_dir}/config.yaml: robot: {exc}") from None
-        return cls(cfg, ckpt, float(summary["knot_gap_norm"]), robot, out_of_limits, control_rate,
-                   measured_tolerance, on_measured)
+        return cls(cfg, ckpt, gap, robot, out_of_limits, control_rate, measured_tolerance, on_measured)
 
     def _ticks(self, rate_hz: float) -> int:
         """Setpoints per decision at `rate_hz`, or a FollowerError unless it is a whole number >= 1."""
@@ -180,15 +183,18 @@ class Follower:
     def _pathset(self, knots: np.ndarray) -> PathSet:
         """The path through `knots` (K, M) as the env follows it, inside the robot's position range (refused or
         clipped), or a FollowerError; nothing of the follower changes."""
-        try:
-            knots = np.asarray(knots, dtype=np.float64)
-        except (TypeError, ValueError):
-            raise FollowerError("path knots must be a (K, M) array of numbers") from None
+        knots = _real_array(knots, "path knots must be a (K, M) array of numbers")
         m = self.robot.path_dof
         if knots.ndim != 2 or knots.shape[1] != m or len(knots) < 2:
             raise FollowerError(f"path knots must be (K >= 2, {m}), got {knots.shape}")
         if not np.isfinite(knots).all():
             raise FollowerError("path knots must be finite")
+        if np.abs(knots).max() > MAX_KNOT_RAD:
+            raise FollowerError(f"path knot {np.abs(knots).max():.3g} rad is beyond {MAX_KNOT_RAD:g} rad (not joint "
+                                "positions in rad?)")
+        length = float(np.linalg.norm(np.diff(knots, axis=0), axis=1).sum())
+        if length > MAX_PATH_RAD:
+            raise FollowerError(f"the path's knots span {length:.3g} rad; at most {MAX_PATH_RAD:g} rad (split it)")
         try:  # the dataset pipeline's knot strategy and table, computed faster (pathrl.paths.quick)
             resampled = quick_knots(self.knots, knots)
             paths = quick_pathset(resampled)
@@ -210,10 +216,7 @@ class Follower:
 
     def _measured(self, q: np.ndarray) -> np.ndarray:
         """The robot's measured joint positions (D,) as float64, or a FollowerError."""
-        try:
-            q = np.asarray(q, dtype=np.float64)
-        except (TypeError, ValueError):
-            raise FollowerError("q must be the robot's joint positions, an array of numbers") from None
+        q = _real_array(q, "q must be the robot's joint positions, an array of numbers")
         if q.shape != (self.robot.dof,):
             raise FollowerError(f"q must have shape ({self.robot.dof},) (the robot's joints), got {q.shape}")
         if not np.isfinite(q).all():
@@ -241,8 +244,6 @@ class Follower:
 
     def _build(self, paths: PathSet) -> tuple[PathTrackingEnv, torch.nn.Module]:
         """The one-env env on `paths` and the policy, or a FollowerError."""
-        from pathrl.runs import RunError
-
         try:
             env = PathTrackingEnv(self.env_cfg, self.robot, paths, build_reward_terms(self.cfg["reward"]["terms"]))
             return env, load_policy(self.cfg, env, self.checkpoint)
@@ -252,9 +253,17 @@ class Follower:
     def replace_path(self, knots: np.ndarray | PreparedPath) -> float:
         """Follow the path through `knots` (K, M) (or a :meth:`prepare`d path: then this takes well under a
         millisecond) from now on, from its point nearest to the robot; the robot keeps its position, velocity and
-        acceleration. Returns that point's distance from the robot (rad)."""
+        acceleration. Returns that point's distance from the robot (rad).
+
+        Refused (FollowerError, nothing changes) during the final approach onto the last knot (its last ~0.1-0.3 s):
+        the env's laws cannot take over from every state of that move (they left the position or velocity range by
+        up to 1.3 mrad in the follower fuzz). Change the path before the end or once :attr:`done`."""
         env = self._env()
         paths = self.prepare(knots).paths
+        if self._approaching:
+            left = self._approach.duration - self._approach_t
+            raise FollowerError(f"the robot is on its final approach to the last knot ({left:.2f} s left), a move the "
+                                "env's limit laws cannot take over from; change the path before the end or once done")
         q = env.pos[0, env.path_index]
         near = (paths.table[0] - q).norm(dim=1)
         j = int(near[: int(torch.ceil(paths.length[0] / paths.table_step)) + 1].argmin())
@@ -354,11 +363,20 @@ class Follower:
         return Setpoints(p, v, a)
 
     def stop(self) -> None:
-        """Brake to rest from the next decision on (the env's braking law: every limit, jerk included), also
-        during the final approach."""
+        """Brake to rest from the next decision on (the env's braking law: every limit, jerk included). During the
+        final approach the approach goes on instead: it ends at rest on the last knot inside every limit within its
+        remaining ~0.1-0.3 s, and the braking law cannot take over from every state of it (see
+        :meth:`replace_path`)."""
         env = self._env()
+        if self._approaching:
+            return
         env.braking[:] = True
         self._stopping, self._approach = True, None
+
+    @property
+    def _approaching(self) -> bool:
+        """On the final approach, not yet at its end (at rest on the last knot, where the env can take over)."""
+        return self._approach is not None and self._approach_t < self._approach.duration
 
     @property
     def done(self) -> bool:
@@ -399,3 +417,21 @@ class Follower:
             raise FollowerError("call reset(knots) first")
         return self.env
 
+
+def _number(x: object) -> float:
+    """`x` as a float, NaN if it is not a number (a NaN fails every range check)."""
+    try:
+        return float(x)
+    except (TypeError, ValueError):
+        return float("nan")
+
+
+def _real_array(x: object, message: str) -> np.ndarray:
+    """`x` as a float64 array, or a FollowerError with `message` (complex values included: casting drops their
+    imaginary part)."""
+    try:
+        if np.iscomplexobj(x):
+            raise TypeError
+        return np.asarray(x, dtype=np.float64)
+    except (TypeError, ValueError, OverflowError):
+        raise FollowerError(message) from None
