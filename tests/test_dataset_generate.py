@@ -177,6 +177,7 @@ def test_broad_random_paths_are_straighter(tmp_path, checker):
         generate_dataset(robot_cfg("iiwa7"), cfg, dest=tmp_path / name, progress=False)
         _check_paths(load_dataset(tmp_path / name, spec), spec, checker, 6.0, 7.0)
         ps = load_pathset(tmp_path / name, "train", ks)
-        gaps = [np.linalg.norm(np.diff(k[:n], axis=0), axis=1) for k, n in zip(ps.knots.numpy(), ps.num_knots.tolist())]
+        knots = zip(ps.knots.numpy(), ps.num_knots.tolist(), strict=True)
+        gaps = [np.linalg.norm(np.diff(k[:n], axis=0), axis=1) for k, n in knots]
         widest[name] = float(np.quantile(np.concatenate(gaps), 0.9))
     assert widest["smooth"] > 1.3 * widest["independent"], widest

@@ -128,6 +128,8 @@ def test_load_errors(tmp_path, splits):
         ([("a", np.eye(2)), ("a", np.eye(2) * 2)], "duplicate path name"),
         ([("", np.eye(2))], "invalid path name"),
         ([("a", np.eye(2)), ("b", np.eye(3))], "joints"),
+        ([("a", np.array([[0.0, 0.0], [1e6, 0.0]]))], "beyond 100 rad"),  # mrad or degrees, not rad
+        ([("a", np.tile([[0.0], [99.0]], (12, 1)))], "at most 1000 rad"),  # 1089 rad of back and forth
     ],
 )
 def test_save_validates(tmp_path, bad, match):
@@ -147,6 +149,21 @@ def test_hand_written_invalid_knots_detected(tmp_path):
     meta = {"format": FORMAT, "splits": {"test": 1}, "content_hash": content_hash({"test": arr})}
     (dest / "dataset.json").write_text(json.dumps(meta))
     with pytest.raises(DatasetError, match=r"test\.npz.*NaN"):
+        load_dataset(dest)
+
+
+def test_hand_written_huge_knots_are_refused_before_any_tabulation(tmp_path):
+    """Finite but huge knots (a native file written by hand) are refused on load, so dataset.out_of_limits=clip never
+    tabulates a path of 10^6 rad."""
+    from pathrl.dataset.io import content_hash, pack
+
+    dest = tmp_path / "ds"
+    dest.mkdir()
+    arr = pack([("a", np.array([[0.0, 0.0], [1e6, 0.0], [2.0, 0.0]]))])
+    np.savez(dest / "test.npz", **arr)
+    meta = {"format": FORMAT, "splits": {"test": 1}, "content_hash": content_hash({"test": arr})}
+    (dest / "dataset.json").write_text(json.dumps(meta))
+    with pytest.raises(DatasetError, match=r"test\.npz.*beyond 100 rad"):
         load_dataset(dest)
 
 

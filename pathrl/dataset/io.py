@@ -48,11 +48,16 @@ if TYPE_CHECKING:
     from pathrl.paths.pathset import PathSet
     from pathrl.robot.model import RobotSpec
 
-__all__ = ["CACHE_DIR", "Dataset", "DatasetError", "FORMAT", "OUT_OF_LIMITS", "Split", "apply_strategy", "cache_path",
-           "check_destination", "check_limits", "content_hash", "load_dataset", "load_pathset", "pack",
-           "read_cache", "save_dataset", "strategy_key", "unpack", "write_cache"]
+__all__ = ["CACHE_DIR", "Dataset", "DatasetError", "FORMAT", "MAX_KNOT_RAD", "MAX_PATH_LENGTH_RAD", "OUT_OF_LIMITS",
+           "Split", "apply_strategy", "cache_path", "check_destination", "check_limits", "content_hash", "load_dataset",
+           "load_pathset", "pack", "read_cache", "save_dataset", "strategy_key", "unpack", "write_cache"]
 
 FORMAT = "pathrl-dataset/1"
+#: Bounds on any stored or imported path, checked before anything is resampled or tabulated: far beyond any robot's
+#: joints (the committed sets: |q| <= 3.2 rad, paths <= 30 rad), small enough that a path's arc-length table (one
+#: sample per mrad) stays within memory, also when its knots are clipped into a robot's range afterwards.
+MAX_KNOT_RAD = 100.0
+MAX_PATH_LENGTH_RAD = 1000.0
 META_FILE = "dataset.json"
 CACHE_DIR = ".cache"
 SPLITS = ("train", "test")
@@ -164,6 +169,13 @@ def _validate_paths(split: str, paths: Sequence[tuple[str, np.ndarray]], where: 
             raise DatasetError(f"{where}: split {split!r}: path {name!r} has {k.shape[1]} joints, others {m}")
         if not np.all(np.isfinite(k)):
             raise DatasetError(f"{where}: split {split!r}: path {name!r}: knots contain NaN or inf")
+        if np.abs(k).max() > MAX_KNOT_RAD:
+            raise DatasetError(f"{where}: split {split!r}: path {name!r}: knot {np.abs(k).max():.3g} rad is beyond "
+                               f"{MAX_KNOT_RAD:g} rad (not joint angles in rad?)")
+        length = float(np.linalg.norm(np.diff(k, axis=0), axis=1).sum())
+        if length > MAX_PATH_LENGTH_RAD:
+            raise DatasetError(f"{where}: split {split!r}: path {name!r} is {length:.3g} rad long; at most "
+                               f"{MAX_PATH_LENGTH_RAD:g} rad are loaded")
         try:
             dedupe_knots(k)
         except PathError as exc:

@@ -23,22 +23,18 @@ from typing import Any
 import numpy as np
 from scipy.interpolate import BSpline
 
-from pathrl.dataset.io import Dataset, DatasetError, check_destination, save_dataset
+from pathrl.dataset.io import MAX_KNOT_RAD, MAX_PATH_LENGTH_RAD, Dataset, DatasetError, check_destination, save_dataset
 from pathrl.dataset.stats import dataset_stats
 from pathrl.robot.model import RobotSpec
 
-__all__ = ["MAX_COEFF_RAD", "MAX_KNOTS", "MAX_PATH_LENGTH_RAD", "find_spline_config", "import_kiemel",
-           "read_episode"]
+__all__ = ["MAX_KNOTS", "find_spline_config", "import_kiemel", "read_episode"]
 
 SPLINE_CONFIG = "spline_config.json"
 
-#: Bounds on what an episode file may hold, checked before anything is evaluated or tabulated: far beyond any
-#: robot's joints (the committed sets: |q| <= 3.2 rad, paths <= 30 rad, <= 300 knots), small enough that a path's
-#: arc-length table (one sample per mrad) stays within memory. A B-spline lies in the convex hull of its
-#: coefficients, so bounded coefficients bound the path.
-MAX_COEFF_RAD = 100.0
+#: Knots or coefficients an episode file may hold (the committed sets: <= 300), checked before anything is evaluated;
+#: values and length are bounded by MAX_KNOT_RAD and MAX_PATH_LENGTH_RAD of pathrl.dataset.io. A B-spline lies in
+#: the convex hull of its coefficients, so coefficients within MAX_KNOT_RAD bound the path.
 MAX_KNOTS = 100_000
-MAX_PATH_LENGTH_RAD = 1000.0
 
 
 def read_episode(path: Path, path_dof: int | None = None) -> np.ndarray:
@@ -71,8 +67,8 @@ def read_episode(path: Path, path_dof: int | None = None) -> np.ndarray:
         raise DatasetError(f"{path}: NaN or inf in '_b_spline' or '_u'")
     if len(u) > MAX_KNOTS or len(c) > MAX_KNOTS:
         raise DatasetError(f"{path}: {max(len(u), len(c))} knots or coefficients; at most {MAX_KNOTS} are imported")
-    if c.size and np.abs(c).max() > MAX_COEFF_RAD:
-        raise DatasetError(f"{path}: spline coefficient {np.abs(c).max():.3g} rad is beyond {MAX_COEFF_RAD:g} rad "
+    if c.size and np.abs(c).max() > MAX_KNOT_RAD:
+        raise DatasetError(f"{path}: spline coefficient {np.abs(c).max():.3g} rad is beyond {MAX_KNOT_RAD:g} rad "
                            "(not joint positions in rad?)")
     if path_dof is not None and c.shape[1] != path_dof:
         raise DatasetError(f"{path}: spline has {c.shape[1]} joints, robot has {path_dof} path joints")

@@ -30,8 +30,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from pathrl.dataset.io import OUT_OF_LIMITS
-from pathrl.dataset.kiemel import MAX_COEFF_RAD, MAX_PATH_LENGTH_RAD
+from pathrl.dataset.io import MAX_KNOT_RAD, MAX_PATH_LENGTH_RAD, OUT_OF_LIMITS
 from pathrl.deploy.approach import Approach, plan_approach
 from pathrl.envs.registry import EVAL_ENV, get_task
 from pathrl.envs.rewards import build_reward_terms
@@ -63,7 +62,7 @@ MEASURED_TOLERANCE = 0.05
 ON_MEASURED = ("refuse", "warn")
 #: Largest |knot| (rad) and knot polyline length (rad) of a path, checked before it is tabulated: the dataset
 #: import's bounds, far beyond any joint range; knots in degrees or mm would take seconds to minutes and gigabytes.
-MAX_KNOT_RAD, MAX_PATH_RAD = MAX_COEFF_RAD, MAX_PATH_LENGTH_RAD
+MAX_PATH_RAD = MAX_PATH_LENGTH_RAD
 
 
 class FollowerError(ValueError):
