@@ -233,3 +233,25 @@ def test_paths_leaving_the_position_limits_are_refused_or_clipped(tmp_path, caps
     umask = os.umask(0)
     os.umask(umask)
     assert stat.S_IMODE(os.stat(ds.path).st_mode) == 0o777 & ~umask
+
+
+def test_clip_also_clips_a_spline_that_leaves_the_range_between_inside_knots(tmp_path):
+    """Every knot inside, the natural spline through a step overshoots the upper limit: refused by default, and
+    dataset.out_of_limits=clip (which the refusal suggests) keeps the whole tabulated spline inside."""
+    from pathrl.dataset.io import load_pathset
+    from pathrl.paths.knots import KnotStrategy
+    from pathrl.robot.external import load_robot_by_name
+
+    robot = load_robot_by_name("iiwa7")
+    hi = robot.pos_limits[robot.path_index][2, 1]
+    t = np.linspace(0.0, 1.0, 9)
+    k = np.zeros((9, robot.path_dof))
+    k[:, 0] = np.linspace(-0.5, 0.5, 9)
+    k[:, 2] = np.where(t < 0.5, hi - 0.5, hi - 0.001)  # a step up to 1 mrad below the limit
+    meta = {"robot": "iiwa7", "kind": "synthetic", "path_joints": list(robot.path_joints), "seed": 0}
+    ds = save_dataset(tmp_path / "d", {"test": [("a", k)]}, meta)
+    strategy = KnotStrategy("curvature", 0.3)
+    with pytest.raises(DatasetError, match=r"1 of 1 paths leave the position range.*out_of_limits=clip"):
+        load_pathset(ds.path, "test", strategy, robot=robot)
+    ps = load_pathset(ds.path, "test", strategy, robot=robot, out_of_limits="clip")
+    assert float(ps.table[..., 2].max()) <= hi

@@ -475,7 +475,8 @@ def load_pathset(
         raise DatasetError(f"{dataset.path}: no split {split!r} (has {sorted(dataset.splits)})")
     if not len(dataset.splits[split]):
         raise DatasetError(f"{dataset.path / (split + '.npz')}: split {split!r} is empty")
-    clip = robot is not None and check_limits(dataset, split, robot, out_of_limits)
+    # clip: also a spline that leaves the range between knots that are all inside
+    clip = robot is not None and (check_limits(dataset, split, robot, out_of_limits) or out_of_limits == "clip")
     resampled = apply_strategy(dataset, split, knots)
     paths = build_pathset(resampled, dataset.splits[split].names, table_step=table_step)
     if robot is None:
