@@ -151,6 +151,7 @@ ROWS: tuple[AdaptRow, ...] = (
     _ablation_row("no_current_position", "current position", "no_position", "the commanded position"),
     _scratch_row("no_current_position", "state without current position", "no_position"),
     _ablation_row("no_current_velocity", "current velocity", "no_velocity", "the commanded velocity"),
+    _scratch_row("no_current_velocity", "state without current velocity", "no_velocity"),
     _ablation_row("no_current_acceleration", "current acceleration", "no_acceleration", "the commanded acceleration"),
     _ablation_row("no_following_positions", "following positions", "no_following", "the next reference position"),
     _scratch_row("no_following_positions", "state without following positions", "no_following"),
