@@ -153,6 +153,7 @@ ROWS: tuple[AdaptRow, ...] = (
     _ablation_row("no_current_velocity", "current velocity", "no_velocity", "the commanded velocity"),
     _scratch_row("no_current_velocity", "state without current velocity", "no_velocity"),
     _ablation_row("no_current_acceleration", "current acceleration", "no_acceleration", "the commanded acceleration"),
+    _scratch_row("no_current_acceleration", "state without current acceleration", "no_acceleration"),
     _ablation_row("no_following_positions", "following positions", "no_following", "the next reference position"),
     _scratch_row("no_following_positions", "state without following positions", "no_following"),
     AdaptRow("on_plate/ten_following_positions", "on plate: state with ten following positions",
