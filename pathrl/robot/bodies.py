@@ -7,6 +7,8 @@ body needs besides forward kinematics.
   meshes (with their ``scale``) and boxes (8 corners); other primitives are skipped.
 * :func:`resting_sole`: the face a convex body rests on when put down on a floor: the downward facet of the
   vertices' convex hull with the largest area (a simulator collides a mesh as its convex hull).
+* :func:`rigid_bodies`: the links that move together (joined by joints the robot does not control) merged into one
+  body each: mass, centre of mass and inertia in the frame of the body's first link.
 """
 
 from __future__ import annotations
@@ -17,9 +19,11 @@ from pathlib import Path
 
 import numpy as np
 
-from pathrl.robot.kinematics import rpy_to_matrix
+from pathrl.robot.kinematics import ForwardKinematics, parse_urdf_joints, rpy_to_matrix
+from pathrl.robot.model import RobotSpec
 
-__all__ = ["LinkInertial", "collision_vertices", "read_stl", "resolve_mesh", "resting_sole", "urdf_inertials"]
+__all__ = ["LinkInertial", "collision_vertices", "read_stl", "resolve_mesh", "resting_sole", "rigid_bodies",
+           "urdf_inertials"]
 
 
 @dataclass(frozen=True)
@@ -139,3 +143,38 @@ def resting_sole(vertices: np.ndarray, max_tilt_deg: float = 10.0, plane_tol: fl
             break
         poly = np.delete(poly, int(np.argmin(dist)), axis=0)
     return poly, normal
+
+
+def rigid_bodies(robot: RobotSpec) -> dict[str, LinkInertial]:
+    """The robot's massive links merged into rigid bodies: links joined by joints not in ``robot.joints`` (fixed, or
+    frozen at 0) move as one. Keyed by each body's first link (the child of its controlled joint, or the URDF root);
+    the :class:`LinkInertial` (mass, centre of mass, inertia about it by the parallel-axis theorem) is in that link's
+    frame. Bodies without mass are left out."""
+    root, joints = parse_urdf_joints(robot.urdf)
+    controlled = set(robot.joints)
+
+    def head(link: str) -> str:
+        while link != root and joints[link].name not in controlled:
+            link = joints[link].parent
+        return link
+
+    inert = {k: v for k, v in urdf_inertials(robot.urdf).items() if v.mass > 0.0}
+    groups: dict[str, list[str]] = {}
+    for link in inert:
+        groups.setdefault(head(link), []).append(link)
+    names = sorted({*groups, *(x for g in groups.values() for x in g)})
+    pos, rot = ForwardKinematics(robot).link_transforms(np.zeros((1, robot.dof)), names)
+    frame = {n: (rot[0, i].numpy(), pos[0, i].numpy()) for i, n in enumerate(names)}  # zero posture
+    out = {}
+    for first, members in groups.items():
+        r0, p0 = frame[first]
+        mass = sum(inert[m].mass for m in members)
+        coms = {m: r0.T @ (frame[m][0] @ inert[m].com + frame[m][1] - p0) for m in members}  # in the first frame
+        com = sum(inert[m].mass * coms[m] for m in members) / mass
+        tensor = np.zeros((3, 3))
+        for m in members:
+            r = r0.T @ frame[m][0]
+            d = coms[m] - com
+            tensor += r @ inert[m].inertia @ r.T + inert[m].mass * (d @ d * np.eye(3) - np.outer(d, d))
+        out[first] = LinkInertial(mass, com, tensor)
+    return out

@@ -5,30 +5,36 @@ Frames: W the world (z up, the floor at z = 0); B the URDF root link (``base``),
 links. All quantities float64, SI units (m, s, rad, kg), batch first.
 
 * Joints are where they are commanded (stiff position-controlled motors); joints not in ``robot.joints`` stay at 0.
-* Feet flat: while the robot stands, the first foot (``FEET[0]``) does not move in W and the body hangs off it by
-  forward kinematics, T_WB(q) = T_WA T_BA(q)^-1. At reset the robot is put down as PyBullet's scene puts it down:
-  in the URDF pose (B = W), then turned about the lowest point of its soles until the soles lie flat (ARMAR-4's
-  soles are 0.39 deg off its foot frames: at rest the pelvis leans back 0.39 deg and 7 mm; PyBullet 0.37 deg).
-* Support polygon: the convex hull of both soles (each foot's resting facet of its collision mesh,
-  :func:`pathrl.robot.bodies.resting_sole`) at the feet's current poses.
-* Zero-moment point: the links are point masses at their centres of mass (URDF masses); their accelerations are
-  second differences of their positions over the model's instants, every `stride`-th control setpoint
-  (``model_rate``, 40 Hz): ``zmp = sum m (p_xy (g + z'') - z p_xy'') / sum m (g + z'')``.
-* Tipping: while the ZMP is inside the polygon the feet stay flat. When it leaves, the body turns as one rigid body
+* Stance: the body hangs off a foot that stays where it was put down, T_WB(q) = T_WF T_BF(q)^-1. Legs moved alike
+  keep both feet flat. Legs that disagree (one knee bent alone) cannot: the body hangs off the foot whose stance
+  puts the centre of mass lower once the other foot's lowest sole corner is lifted onto the floor (:func:`stance`;
+  the other foot rocks onto that corner: one knee bent by a turns the body back by a, as PyBullet's motors let it),
+  blended over ``STANCE_SOFTNESS`` (m) of that height so that the pose stays continuous. At reset the robot is put
+  down as PyBullet's scene puts it down: in the URDF pose (B = W), then turned about the lowest point of its soles
+  until they lie flat (ARMAR-4's soles are 0.39 deg off its foot frames: at rest the pelvis leans back 0.39 deg and
+  7 mm; PyBullet 0.37 deg).
+* Support polygon: the convex hull of the sole corners (each foot's resting facet of its collision mesh,
+  :func:`pathrl.robot.bodies.resting_sole`) within ``CONTACT_TOL`` of the floor in the stance.
+* Zero-moment point: the robot's rigid bodies (links that move together merged,
+  :func:`pathrl.robot.bodies.rigid_bodies`) are point masses at their centres of mass (URDF masses); their
+  accelerations are second differences of their positions in the stance over the model's instants, every
+  `stride`-th control setpoint (``model_rate``, 40 Hz): ``zmp = sum m (p_xy (g + z'') - z p_xy'') / sum m (g + z'')``.
+* Tipping: while the ZMP is inside the polygon the robot stands. When it leaves, the body turns as one rigid body
   about the polygon edge it crossed (angle theta >= 0 and rate omega per env; the edge is kept until it lands):
 
       I_e theta'' = M g (d cos theta + h sin theta) - sum m (z x_n'' - x_n z'')
 
-  with d, h the centre of mass outward from and above the edge in the flat pose, x_n a link's outward distance,
-  I_e the links' point masses and URDF inertia tensors about the edge; the sum is the joints' own motion (at
-  theta = 0 the right side is the ZMP's distance outside the edge times sum m (g + z''), so a tip starts exactly
-  when the ZMP leaves). It is integrated at the control rate; theta back at 0 puts the feet down (an inelastic
-  landing: flat, at rest); at 90 deg the body lies on the floor.
+  with d, h the centre of mass outward from and above the edge in the stance, x_n a body's outward distance, I_e
+  the bodies' point masses and URDF inertia tensors about the edge (the tensors summed at the decision step's end);
+  the sum is the joints' own motion (at theta = 0 the right side is the ZMP's distance outside the edge times
+  sum m (g + z''): a tip starts exactly when the ZMP leaves). It is integrated at the control rate; theta back at 0
+  puts the robot down again (an inelastic landing: at rest), and so does a sole corner the legs put down on the
+  floor ``CATCH_DIST`` beyond the edge (checked once per decision step); at 90 deg the body lies on the floor.
 * Sensor: the pelvis (URDF link ``root``) offset from its position at reset (the URDF pose, before the robot is
   put down: PyBullet's scene reads it there too), its orientation and tilt; fallen: tilt > 30 deg.
 
-Neglected: the motors' compliance and force limits, foot slip and turning about the floor normal, one foot lifting
-alone (the body tips about a polygon edge only), bounces, the Coriolis terms of the joint motion during a tip.
+Neglected: the motors' compliance and force limits (but for the choice of stance foot), foot slip and turning
+about the floor normal, bounces, the Coriolis terms of the joint motion during a tip.
 Measured against PyBullet: tests/test_standing_model.py and tools/lab/standing_gap.py (docs/armar4_balance.md).
 """
 
@@ -40,13 +46,14 @@ from typing import NamedTuple
 import torch
 from torch import Tensor
 
-from pathrl.robot.bodies import collision_vertices, resting_sole, urdf_inertials
+from pathrl.robot.bodies import collision_vertices, resting_sole, rigid_bodies
 from pathrl.robot.kinematics import ForwardKinematics, matrix_to_quat
 from pathrl.robot.model import RobotSpec
 from pathrl.sim.feedback import GRAVITY, FeedbackStep
 
-__all__ = ["BASE_POS_SCALE", "BASE_TILT_SCALE", "FALL_TILT_RAD", "FEET", "PELVIS_LINK", "AnalyticStanding",
-           "hull_edges", "polygon_margin", "rotation_about", "standing_observation", "standing_values"]
+__all__ = ["BASE_POS_SCALE", "BASE_TILT_SCALE", "CATCH_DIST", "CONTACT_TOL", "FALL_TILT_RAD", "FEET", "PELVIS_LINK",
+           "STANCE_SOFTNESS", "AnalyticStanding", "edge_line", "hull_edges", "polygon_margin", "rotation_about",
+           "stance", "standing_observation", "standing_values"]
 
 #: Observation scales of the free-standing robot (the authors' normalization) and the fall threshold.
 BASE_POS_SCALE = 0.2 / math.sqrt(3.0)  # m
@@ -54,6 +61,9 @@ BASE_TILT_SCALE = 0.125  # rad
 FALL_TILT_RAD = math.radians(30.0)
 PELVIS_LINK = "root"  # URDF link of the pelvis sensor
 FEET = ("leg_ank2_r0", "leg_ank2_r1")  # URDF links whose soles touch the floor (heel and toe links stand higher)
+STANCE_SOFTNESS = 5e-4  # m of centre-of-mass height over which the stance passes from one foot to the other
+CONTACT_TOL = 2e-3  # m: a sole corner this close to the floor (or below it) in the stance supports the robot
+CATCH_DIST = 1e-2  # m: a supporting sole corner this far beyond the edge a robot tips about puts it down
 
 
 def standing_values(reading: Tensor, ok: Tensor) -> dict[str, Tensor]:
@@ -71,30 +81,47 @@ def standing_observation(reading: Tensor) -> Tensor:
     return torch.cat([reading[:, :3] / BASE_POS_SCALE, reading[:, 3:7], tilt], dim=1).clamp(-1.0, 1.0)
 
 
-def hull_edges(points: Tensor, tol: float = 1e-12) -> tuple[Tensor, Tensor, Tensor]:
-    """Edges of the convex hulls of point sets (N, S, 2), as all ordered pairs (i, j): ``valid`` (N, S, S) for the
-    counter-clockwise hull edges i -> j (every point on their left, collinear ones included), outward unit normals
-    (N, S, S, 2) and line offsets (N, S, S) (a point x is ``normal . x - offset`` outside the edge's line)."""
+def hull_edges(points: Tensor, mask: Tensor | None = None, tol: float = 1e-12) -> tuple[Tensor, Tensor, Tensor]:
+    """Edges of the convex hulls of point sets (N, S, 2) (only the points where `mask` (N, S) is set), as all ordered
+    pairs (i, j): ``valid`` (N, S, S) for the counter-clockwise hull edges i -> j (every point on their left,
+    collinear ones included), outward unit normals (N, S, S, 2) and line offsets (N, S, S) (a point x is
+    ``normal . x - offset`` outside the edge's line)."""
+    if mask is not None:  # a point left out becomes a copy of one kept: it adds no edge of its own
+        kept = points.gather(1, mask.to(torch.int8).argmax(dim=1)[:, None, None].expand(-1, 1, 2))
+        points = torch.where(mask[..., None], points, kept)
+    x, y = points[..., 0], points[..., 1]
+    c = x[:, :, None] * y[:, None, :] - y[:, :, None] * x[:, None, :]  # (N, a, b): p_a x p_b
+    cross = c[:, None, :, :] + c[:, :, :, None] + c.transpose(1, 2)[:, :, None, :]  # (N, i, j, k): e_ij x (p_k - p_i)
     e = points[:, None, :, :] - points[:, :, None, :]  # (N, i, j, 2): p_j - p_i
-    r = points[:, None, None, :, :] - points[:, :, None, None, :]  # (N, i, 1, k, 2): p_k - p_i
-    cross = e[..., None, 0] * r[..., 1] - e[..., None, 1] * r[..., 0]  # (N, i, j, k)
     length = e.norm(dim=-1)
     valid = (length > 1e-9) & (cross >= -tol).all(dim=-1)
+    if mask is not None:
+        valid = valid & mask[:, :, None] & mask[:, None, :]
     normal = torch.stack([e[..., 1], -e[..., 0]], dim=-1) / length.clamp(min=1e-9)[..., None]
     offset = (normal * points[:, :, None, :]).sum(-1)
     return valid, normal, offset
 
 
-def polygon_margin(points: Tensor, x: Tensor) -> tuple[Tensor, Tensor, Tensor]:
-    """How far points `x` (N, K, 2) lie outside the convex hulls of `points` (N, S, 2): the largest signed distance
-    to a hull edge's line (N, K) (> 0 outside, minus the distance to the nearest edge inside), with that edge's
-    outward normal (N, K, 2) and offset (N, K)."""
-    valid, normal, offset = hull_edges(points)  # (N, S, S), (N, S, S, 2), (N, S, S)
+def polygon_margin(points: Tensor, x: Tensor, mask: Tensor | None = None) -> tuple[Tensor, Tensor, Tensor, Tensor]:
+    """How far points `x` (N, K, 2) lie outside the convex hulls of `points` (N, S, 2) (those `mask` (N, S) sets):
+    the largest signed distance to a hull edge's line (N, K) (> 0 outside, minus the distance to the nearest edge
+    inside), with that edge's outward normal (N, K, 2), offset (N, K) and corners i S + j (N, K) (:func:`edge_line`)."""
+    valid, normal, offset = hull_edges(points, mask)  # (N, S, S), (N, S, S, 2), (N, S, S)
     normal, offset = normal.flatten(1, 2), offset.flatten(1)  # (N, E, 2), (N, E)
     dist = (x @ normal.transpose(1, 2) - offset[:, None]).masked_fill(~valid.flatten(1)[:, None], -math.inf)
     best = dist.argmax(dim=2)  # (N, K)
     return (dist.gather(2, best[..., None])[..., 0], normal.gather(1, best.flatten(1)[..., None].expand(-1, -1, 2)),
-            offset.gather(1, best))
+            offset.gather(1, best), best)
+
+
+def edge_line(points: Tensor, edge: Tensor) -> tuple[Tensor, Tensor]:
+    """The line through corners i -> j (``edge`` = i S + j, (N,)) of point sets (N, S, 2): outward unit normal (its
+    right side; (N, 2)) and offset (N,), as :func:`hull_edges` gives them."""
+    s = points.shape[1]
+    pi = points.gather(1, (edge // s)[:, None, None].expand(-1, 1, 2))[:, 0]
+    e = points.gather(1, (edge % s)[:, None, None].expand(-1, 1, 2))[:, 0] - pi
+    normal = torch.stack([e[:, 1], -e[:, 0]], dim=1) / e.norm(dim=1, keepdim=True).clamp(min=1e-9)
+    return normal, (normal * pi).sum(dim=1)
 
 
 def rotation_about(axis: Tensor, angle: Tensor) -> Tensor:
@@ -106,6 +133,14 @@ def rotation_about(axis: Tensor, angle: Tensor) -> Tensor:
     return torch.eye(3, dtype=axis.dtype, device=axis.device) + s * k + c1 * (k @ k)
 
 
+def _quat_matrix(q: Tensor) -> Tensor:
+    """Rotation matrices (M, 3, 3) of quaternions (M, 4) xyzw (normalized here)."""
+    x, y, z, w = (q / q.norm(dim=-1, keepdim=True)).unbind(-1)
+    return torch.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w),
+                        2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w),
+                        2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], dim=-1).reshape(-1, 3, 3)
+
+
 def _align(a: Tensor, b: Tensor) -> Tensor:
     """The smallest rotations (N, 3, 3) taking unit vectors a (N, 3) to b (N, 3) (not opposite)."""
     v, c = torch.linalg.cross(a, b), (a * b).sum(-1)
@@ -115,30 +150,55 @@ def _align(a: Tensor, b: Tensor) -> Tensor:
     return torch.eye(3, dtype=a.dtype, device=a.device) + k + (k @ k) / (1.0 + c)[:, None, None]
 
 
+def _blend(rot: Tensor, w: Tensor) -> Tensor:
+    """Weighted mean (M, 3, 3) of rotations rot (M, F, 3, 3) with weights w (M, F) (normalized quaternion sum)."""
+    q = matrix_to_quat(rot)
+    q = q * torch.where((q * q[:, :1]).sum(-1, keepdim=True) < 0.0, -1.0, 1.0)  # one hemisphere
+    return _quat_matrix((w[..., None] * q).sum(dim=1))
+
+
+def stance(com: Tensor, feet_p: Tensor, feet_r: Tensor, sole: Tensor, rot_wf: Tensor, pos_wf: Tensor,
+           softness: float = STANCE_SOFTNESS) -> tuple[Tensor, Tensor]:
+    """The pose (R_WB (M, 3, 3), p_WB (M, 3)) of M standing postures in B: centre of mass `com` (M, 3), feet at
+    `feet_p` (M, F, 3), `feet_r` (M, F, 3, 3), sole corners `sole` (M, S, 3), each foot f put down at (`rot_wf`
+    (M, F, 3, 3), `pos_wf` (M, F, 3)) in W. Hung off foot f, the body's centre of mass would stand at z_f, and the
+    other feet's lowest sole corner at -lift_f below the floor; the body takes the stances of lowest z_f + lift_f,
+    softmax-weighted over `softness` (m). Feet that agree give one pose."""
+    r = rot_wf @ feet_r.transpose(-1, -2)  # (M, F, 3, 3): R_WB hung off foot f
+    p = pos_wf - (r @ feet_p[..., None])[..., 0]  # (M, F, 3)
+    up = r[..., 2, :]  # (M, F, 3): world z in B
+    height = (up * com[:, None]).sum(-1) + p[..., 2]  # (M, F)
+    lift = (-(torch.einsum("msj,mfj->mfs", sole, up) + p[..., 2:3]).amin(dim=-1)).clamp(min=0.0)
+    w = torch.softmax(-(height + lift) / softness, dim=1)
+    return _blend(r, w), (w[..., None] * p).sum(dim=1)
+
+
 class _Body(NamedTuple):
     """Link quantities of M postures in B: centres of mass (M, L, 3), link rotations (M, L, 3, 3), pelvis position
-    (M, 3) and rotation (M, 3, 3), first foot position (M, 3) and rotation (M, 3, 3), sole points (M, S, 3), sole
+    (M, 3) and rotation (M, 3, 3), feet positions (M, F, 3) and rotations (M, F, 3, 3), sole corners (M, S, 3), sole
     normals of the feet (M, F, 3)."""
 
     com: Tensor
     rot: Tensor
     pelvis_p: Tensor
     pelvis_r: Tensor
-    foot_p: Tensor
-    foot_r: Tensor
+    feet_p: Tensor
+    feet_r: Tensor
     sole: Tensor
     sole_n: Tensor
 
 
 class _Flat(NamedTuple):
-    """Link quantities of M postures in W, feet flat: centres of mass (M, L, 3), R_WB (M, 3, 3), pelvis position
-    (M, 3) and rotation (M, 3, 3), sole points (M, S, 2) (x, y)."""
+    """Link quantities of M postures in W, standing (:func:`stance`): centres of mass (M, L, 3), R_WB (M, 3, 3),
+    pelvis position (M, 3) and rotation (M, 3, 3), sole corners (M, S, 2) (x, y) and which of them touch the floor
+    (M, S)."""
 
     com: Tensor
     r_wb: Tensor
     pelvis_p: Tensor
     pelvis_r: Tensor
     sole: Tensor
+    contact: Tensor
 
 
 class AnalyticStanding:
@@ -148,7 +208,8 @@ class AnalyticStanding:
 
     ``reading`` (N, 8): offset (m), quaternion, tilt (rad), as PyBullet's pool reports it; ``theta``, ``omega`` (N,):
     the tip about the edge ``edge_n`` (N, 2) (outward normal), ``edge_c`` (N,) (line ``edge_n . x = edge_c``);
-    ``margin`` (N,): the ZMP's distance outside the support polygon at the last model instant (m, < 0 inside).
+    ``margin`` (N,): the ZMP's distance outside the support polygon at the last model instant (m, < 0 inside);
+    ``sole`` (N, S, 2), ``contact`` (N, S): the sole corners in W and those that carry the robot.
     """
 
     name = "standing"
@@ -166,8 +227,8 @@ class AnalyticStanding:
         self.generator.manual_seed(seed)
         self.fk = ForwardKinematics(robot, device=self.device)
         f64 = dict(dtype=torch.float64, device=self.device)
-        inert = urdf_inertials(robot.urdf)
-        self.links = [name for name, i in inert.items() if i.mass > 0.0]
+        inert = rigid_bodies(robot)  # the links that move together merged (ARMAR-4: 47 links, 31 bodies)
+        self.links = list(inert)
         self.mass = torch.tensor([inert[k].mass for k in self.links], **f64)  # (L,) kg
         self.total = float(self.mass.sum())
         self.com_local = torch.tensor([inert[k].com.tolist() for k in self.links], **f64)  # (L, 3) m, link frames
@@ -180,12 +241,15 @@ class AnalyticStanding:
         self.edge_n = torch.zeros(num_envs, 2, **f64)
         self.edge_n[:, 0] = 1.0
         self.edge_c = torch.zeros(num_envs, **f64)
+        self.edge = torch.zeros(num_envs, dtype=torch.long, device=self.device)  # its sole corners i S + j
         self.margin = torch.zeros(num_envs, **f64)
-        self.rot_wa = torch.eye(3, **f64).expand(num_envs, 3, 3).clone()  # first foot in W while flat
-        self.pos_wa = torch.zeros(num_envs, 3, **f64)
+        nf = len(self.feet)
+        self.rot_wf = torch.eye(3, **f64).expand(num_envs, nf, 3, 3).clone()  # where the feet were put down in W
+        self.pos_wf = torch.zeros(num_envs, nf, 3, **f64)
         self.pelvis0 = torch.zeros(num_envs, 3, **f64)
-        self.hist = torch.zeros(num_envs, 2, len(self.links), 3, **f64)  # link COMs (flat pose) at the last 2 instants
-        self.sole = torch.zeros(num_envs, len(self.sole_foot), 2, **f64)  # sole points (flat pose, x y) now
+        self.hist = torch.zeros(num_envs, 2, len(self.links), 3, **f64)  # body COMs (stance) at the last 2 instants
+        self.sole = torch.zeros(num_envs, len(self.sole_foot), 2, **f64)  # sole corners (stance, x y) now
+        self.contact = torch.ones(num_envs, len(self.sole_foot), dtype=torch.bool, device=self.device)
         self.reading = torch.zeros(num_envs, 8, **f64)
         self.reading[:, 6] = 1.0
         self.ok = torch.ones(num_envs, dtype=torch.bool, device=self.device)
@@ -213,18 +277,19 @@ class AnalyticStanding:
         com = pos[:, :nl] + (rot[:, :nl] @ self.com_local[:, :, None])[..., 0]
         fp, fr = pos[:, nl + 1:], rot[:, nl + 1:]
         sole = fp[:, self.sole_foot] + (fr[:, self.sole_foot] @ self.sole_local[:, :, None])[..., 0]
-        return _Body(com, rot[:, :nl], pos[:, nl], rot[:, nl], fp[:, 0], fr[:, 0], sole,
-                     (fr @ self.sole_normal[:, :, None])[..., 0])
+        normals = (fr @ self.sole_normal[:, :, None])[..., 0]
+        return _Body(com, rot[:, :nl], pos[:, nl], rot[:, nl], fp, fr, sole, normals)
 
-    def _flat(self, b: _Body, rot_wa: Tensor, pos_wa: Tensor) -> _Flat:
-        """`b` (M postures) in W with the first foot at (`rot_wa` (M, 3, 3), `pos_wa` (M, 3))."""
-        r = rot_wa @ b.foot_r.transpose(1, 2)  # R_WB
-        p = pos_wa - (r @ b.foot_p[:, :, None])[..., 0]
+    def _flat(self, b: _Body, rot_wf: Tensor, pos_wf: Tensor) -> _Flat:
+        """`b` (M postures) standing in W, its feet put down at (`rot_wf` (M, F, 3, 3), `pos_wf` (M, F, 3))."""
+        com = (self.mass[:, None] * b.com).sum(dim=1) / self.total
+        r, p = stance(com, b.feet_p, b.feet_r, b.sole, rot_wf, pos_wf)
+        sole = b.sole @ r.transpose(1, 2) + p[:, None]
         return _Flat(b.com @ r.transpose(1, 2) + p[:, None], r, (r @ b.pelvis_p[:, :, None])[..., 0] + p,
-                     r @ b.pelvis_r, (b.sole[..., :2] @ r[:, :2, :2].transpose(1, 2)) + p[:, None, :2])
+                     r @ b.pelvis_r, sole[..., :2], sole[..., 2] <= CONTACT_TOL)
 
     def reset(self, env_ids: Tensor, q: Tensor) -> None:
-        """See :meth:`Feedback.reset`: robots of `env_ids` put down flat at rest at postures q (k, D) (rad)."""
+        """See :meth:`Feedback.reset`: robots of `env_ids` put down on their soles at rest at postures q (k, D)."""
         if len(env_ids) == 0:
             return
         q = q.to(device=self.device, dtype=torch.float64)
@@ -236,12 +301,12 @@ class AnalyticStanding:
         low = ((b.sole - pivot[:, None]) @ level.transpose(1, 2))[..., 2].amin(dim=1) + pivot[:, 2]
         pos_wb = pivot - (level @ pivot[:, :, None])[..., 0]
         pos_wb[:, 2] -= low  # the lowest sole point on the floor
-        self.rot_wa[env_ids] = level @ b.foot_r
-        self.pos_wa[env_ids] = (level @ b.foot_p[:, :, None])[..., 0] + pos_wb
-        flat = self._flat(b, self.rot_wa[env_ids], self.pos_wa[env_ids])
+        self.rot_wf[env_ids] = level[:, None] @ b.feet_r
+        self.pos_wf[env_ids] = (level[:, None] @ b.feet_p[..., None])[..., 0] + pos_wb[:, None]
+        flat = self._flat(b, self.rot_wf[env_ids], self.pos_wf[env_ids])
         self.pelvis0[env_ids] = b.pelvis_p  # the URDF pose, as PyBullet's scene reads it at reset
         self.hist[env_ids] = flat.com[:, None].expand(-1, 2, -1, -1)
-        self.sole[env_ids] = flat.sole
+        self.sole[env_ids], self.contact[env_ids] = flat.sole, flat.contact
         self.theta[env_ids], self.omega[env_ids], self.margin[env_ids] = 0.0, 0.0, -1.0
         tilt = torch.arccos(b.pelvis_r[:, 2, 2].clamp(-1.0, 1.0))  # read as PyBullet's scene reads it at reset:
         self.reading[env_ids] = torch.cat([torch.zeros_like(b.pelvis_p), matrix_to_quat(b.pelvis_r), tilt[:, None]],
@@ -254,15 +319,17 @@ class AnalyticStanding:
         qs = q[:, self.stride - 1 :: self.stride].to(device=self.device, dtype=torch.float64)  # (N, K, D)
         n, k = qs.shape[:2]
         body = self._body(qs.reshape(n * k, -1))
-        flat = self._flat(body, self.rot_wa.repeat_interleave(k, 0), self.pos_wa.repeat_interleave(k, 0))
+        flat = self._flat(body, self.rot_wf.repeat_interleave(k, 0), self.pos_wf.repeat_interleave(k, 0))
         com = torch.cat([self.hist, flat.com.reshape(n, k, *flat.com.shape[1:])], dim=1)  # (N, K + 2, L, 3)
         acc = (com[:, 2:] - 2.0 * com[:, 1:-1] + com[:, :-2]) / self.h**2  # at the instants com[:, 1:-1]
-        rot = body.rot.reshape(n, k, *body.rot.shape[1:])  # link rotations in B
-        r_wb = flat.r_wb.reshape(n, k, 3, 3)
+        rot_w = flat.r_wb.reshape(n, k, 1, 3, 3)[:, -1] @ body.rot.reshape(n, k, *body.rot.shape[1:])[:, -1]
+        spin = (rot_w @ self.inertia_local @ rot_w.transpose(-1, -2)).sum(dim=1)  # (N, 3, 3) at the step's end
         self.sole = flat.sole.reshape(n, k, -1, 2)[:, -1].clone()  # the polygon of the step's end serves all instants
-        margin, normal, offset = polygon_margin(self.sole, self.zmp(com[:, 1:-1], acc))  # (N, K), (N, K, 2), (N, K)
+        self.contact = flat.contact.reshape(n, k, -1)[:, -1].clone()
+        self._follow_edge()
+        margin, normal, offset, edge = polygon_margin(self.sole, self.zmp(com[:, 1:-1], acc), self.contact)
         for i in range(k):
-            self._advance(com[:, i + 1], acc[:, i], rot[:, i], r_wb[:, i], margin[:, i], normal[:, i], offset[:, i])
+            self._advance(com[:, i + 1], acc[:, i], spin, margin[:, i], normal[:, i], offset[:, i], edge[:, i])
         self.hist = com[:, -2:].clone()
         was_up = self.ok.clone()
         self.reading = self._read(flat.pelvis_p.reshape(n, k, 3)[:, -1], flat.pelvis_r.reshape(n, k, 3, 3)[:, -1])
@@ -275,24 +342,35 @@ class AnalyticStanding:
         moment = (w[..., None] * p[..., :2]).sum(-2) - (self.mass[:, None] * p[..., 2:3] * a[..., :2]).sum(-2)
         return moment / w.sum(-1).clamp(min=1e-6 * self.total * GRAVITY)[..., None]
 
-    def _advance(self, p: Tensor, a: Tensor, rot: Tensor, r_wb: Tensor, margin: Tensor, normal: Tensor,
-                 offset: Tensor) -> None:
-        """One model instant: link COMs p (N, L, 3) (flat pose) accelerating at a (N, L, 3), link rotations rot
-        (N, L, 3, 3) in B, R_WB (N, 3, 3), the ZMP's margin (N,) to the support polygon's edge it is nearest to leaving
-        (outward normal (N, 2), offset (N,)). A flat robot takes that edge; a tipping one keeps its own. theta and
-        omega advance `stride` control periods (semi-implicit Euler); theta stays in [0, 90 deg] (landed, lying)."""
+    def _follow_edge(self) -> None:
+        """A tipping robot's edge moves with its two sole corners (the stance moves with the legs); a supporting
+        corner the legs put down ``CATCH_DIST`` beyond it puts the robot down."""
+        tipping = (self.theta > 0.0) | (self.omega > 0.0)
+        normal, offset = edge_line(self.sole, self.edge)
+        self.edge_n = torch.where(tipping[:, None], normal, self.edge_n)
+        self.edge_c = torch.where(tipping, offset, self.edge_c)
+        beyond = ((self.sole @ self.edge_n[:, :, None])[..., 0] - self.edge_c[:, None]).masked_fill(~self.contact, -1.0)
+        caught = tipping & (beyond.amax(dim=1) > CATCH_DIST)
+        self.theta, self.omega = self.theta.masked_fill(caught, 0.0), self.omega.masked_fill(caught, 0.0)
+
+    def _advance(self, p: Tensor, a: Tensor, spin: Tensor, margin: Tensor, normal: Tensor, offset: Tensor,
+                 edge: Tensor) -> None:
+        """One model instant: body COMs p (N, L, 3) (standing pose) accelerating at a (N, L, 3), the bodies' own
+        inertia tensors summed in W (N, 3, 3), the ZMP's margin (N,) to the support polygon's edge it is nearest to
+        leaving (outward normal (N, 2), offset (N,), corners (N,)). A robot standing still takes that edge; a tipping
+        one keeps its own. theta and omega advance `stride` control periods (semi-implicit Euler); theta stays in
+        [0, 90 deg]."""
         still = (self.theta <= 0.0) & (self.omega <= 0.0)
         self.edge_n = torch.where(still[:, None], normal, self.edge_n)
         self.edge_c = torch.where(still, offset, self.edge_c)
+        self.edge = torch.where(still, edge, self.edge)
         self.margin = margin
         m, n = self.mass, self.edge_n
         x = (p[..., :2] * n[:, None]).sum(-1) - self.edge_c[:, None]  # (N, L) outward of the edge
         z = p[..., 2]
         joints = (m * (z * (a[..., :2] * n[:, None]).sum(-1) - x * a[..., 2])).sum(1)  # N m
         axis = torch.stack([-n[:, 1], n[:, 0], torch.zeros_like(n[:, 0])], dim=1)  # z x n: tips towards n
-        u = ((axis[:, None, :] @ r_wb)[:, None] @ rot)[:, :, 0]  # (N, L, 3): the axis in the link frames
-        spin = torch.einsum("nli,lij,nlj->n", u, self.inertia_local, u)
-        inertia = (m * (x * x + z * z)).sum(1) + spin  # kg m^2 about the edge
+        inertia = (m * (x * x + z * z)).sum(1) + ((axis[:, None, :] @ spin)[:, 0] * axis).sum(1)  # kg m^2, edge
         d, h = (m * x).sum(1) / self.total, (m * z).sum(1) / self.total
         th, om = self.theta, self.omega
         for _ in range(self.stride):
@@ -304,7 +382,7 @@ class AnalyticStanding:
         self.theta, self.omega = th, om
 
     def _read(self, pelvis_p: Tensor, pelvis_r: Tensor, env_ids: Tensor | None = None) -> Tensor:
-        """Pelvis readings (M, 8) of flat pelvis poses (M, 3), (M, 3, 3) turned by the envs' tip (all, or
+        """Pelvis readings (M, 8) of pelvis poses in the stance (M, 3), (M, 3, 3) turned by the envs' tip (all, or
         `env_ids`)."""
         sel = slice(None) if env_ids is None else env_ids
         n, c, th = self.edge_n[sel], self.edge_c[sel], self.theta[sel]
@@ -321,12 +399,13 @@ class AnalyticStanding:
         """Start envs `env_ids` tipping at `rate` (rad/s) about the edge of their support polygon whose outward normal
         is nearest `direction` (x, y) (an impulsive push of the standing robot; a test and study device)."""
         d = torch.as_tensor(direction, dtype=torch.float64, device=self.device).expand(len(env_ids), 2)
-        valid, normal, offset = hull_edges(self.sole[env_ids])
+        valid, normal, offset = hull_edges(self.sole[env_ids], self.contact[env_ids])
         score = (normal * d[:, None, None, :]).sum(-1).masked_fill(~valid, -math.inf).flatten(1)
         best = score.argmax(dim=1)
         rows = torch.arange(len(env_ids), device=self.device)
         self.edge_n[env_ids] = normal.flatten(1, 2)[rows, best]
         self.edge_c[env_ids] = offset.flatten(1)[rows, best]
+        self.edge[env_ids] = best
         self.omega[env_ids] = torch.as_tensor(rate, dtype=torch.float64, device=self.device)
 
     def values(self) -> dict[str, Tensor]:
