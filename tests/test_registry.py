@@ -137,3 +137,14 @@ def test_every_experiment_creates_and_steps(name, request):
     cfg = _cfg([f"+experiment={name}", "task.workers=1"])
     check_task(cfg)
     _step(_experiment_env(cfg, request))
+
+
+def test_standing_builds_on_the_analytic_model_and_defaults_to_pybullet(request):
+    """``task=standing task.backend=analytic``: the tracking env with the batched standing model (training); the task's
+    default stays PyBullet (evaluation)."""
+    assert task_cfg(_cfg(["+experiment=armar4_legs_target_point_balancing"]))["backend"] == "pybullet"
+    cfg = _cfg(["+experiment=armar4_legs_target_point_balancing", "task.backend=analytic"])
+    env = _experiment_env(cfg, request)
+    assert type(env).__name__ == "PathTrackingEnv" and type(env.feedback).__name__ == "AnalyticStanding"
+    assert env.num_envs == 2
+    _step(env)

@@ -68,7 +68,7 @@ def check_run_device(cfg: Mapping[str, Any]) -> torch.device:
     _check_name(text)
     task = _pybullet_task(cfg)
     if task is not None and text != "cpu":
-        hint = "" if task == "standing" else " or task.backend=analytic"
+        hint = " or task.backend=analytic"
         raise DeviceError(f"device={text}: task {task} simulates in PyBullet, on the CPU only; use device=cpu{hint}")
     return resolve_device(text)
 

@@ -5,7 +5,7 @@ is built. Training, evaluation and the CLIs build envs through :func:`make_env` 
 Tasks:
   tracking            plain path tracking (:class:`~pathrl.envs.tracking.PathTrackingEnv`, no feedback)
   ball_on_plate       path tracking with a ball on a plate at the flange (``task.backend`` analytic | pybullet)
-  standing            path tracking of ARMAR-4 standing free on the floor (PyBullet)
+  standing            path tracking of ARMAR-4 standing free on the floor (``task.backend`` pybullet | analytic)
   trueadapt_on_plate  TrueAdapt trajectory adaptation, ball kept off the plate's border
   trueadapt_in_place  TrueAdapt trajectory adaptation, ball kept near its start
                       (both :class:`~pathrl.envs.trueadapt.TrueAdaptEnv`)
@@ -80,7 +80,7 @@ def task_cfg(cfg: dict[str, Any]) -> dict[str, Any]:
 def make_feedback(cfg: dict[str, Any], robot: RobotSpec, num_envs: int, seed: int, backend: str | None = None,
                   device: str | None = None):
     """The feedback source of a config's task (None for plain tracking); `backend` overrides task.backend. `device`:
-    the env's (default: the config's); the analytic ball is built there, PyBullet refuses any but the CPU."""
+    the env's (default: the config's); the analytic models are built there, PyBullet refuses any but the CPU."""
     t = task_cfg(cfg)
     if t["feedback"] is None:
         return None
@@ -96,13 +96,17 @@ def make_feedback(cfg: dict[str, Any], robot: RobotSpec, num_envs: int, seed: in
     if t["imu"] and t["feedback"] != "ball_on_plate":
         raise ValueError(f"task.imu: the plate sensor exists only for task ball_on_plate, not {t['feedback']!r}")
     if t["feedback"] == "standing":
-        if backend != "pybullet":
-            raise ValueError("task standing: no analytic model of a standing robot exists; use task.backend=pybullet")
         if not robot.name.startswith("armar4"):
             raise ValueError(f"task standing is for ARMAR-4 (armar4, armar4_legs), not {robot.name}")
-        from pathrl.sim.vec import PyBulletStanding
+        if backend == "analytic":  # the batched torch model (training); PyBullet is the reference (evaluation)
+            from pathrl.sim.standing import AnalyticStanding
 
-        return PyBulletStanding(robot, num_envs, rate, seed=seed, workers=int(t["workers"]))
+            return AnalyticStanding(robot, num_envs, rate, seed=seed, device=device)
+        if backend == "pybullet":
+            from pathrl.sim.vec import PyBulletStanding
+
+            return PyBulletStanding(robot, num_envs, rate, seed=seed, workers=int(t["workers"]))
+        raise ValueError(f"task.backend: expected one of {list(FEEDBACK_BACKENDS)}, got {backend!r}")
     if backend == "analytic":
         from pathrl.sim.feedback import AnalyticBall
 

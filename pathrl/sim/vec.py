@@ -6,7 +6,8 @@ setpoints (n_w, C, D) and receives the sensor readings; the workers simulate in 
 seeded with ``seed + i``, so results do not depend on the number of workers.
 
 * :class:`PyBulletBall`: iiwa with a plate and a ball (:mod:`pathrl.sim.ball_plate`).
-* :class:`PyBulletStanding`: free-standing ARMAR-4 (:mod:`pathrl.sim.humanoid`), no torch model exists for it.
+* :class:`PyBulletStanding`: free-standing ARMAR-4 (:mod:`pathrl.sim.humanoid`); its torch twin for training is
+  :class:`pathrl.sim.standing.AnalyticStanding` (same observation).
 """
 
 from __future__ import annotations
@@ -22,13 +23,9 @@ from torch import Tensor
 
 from pathrl.robot.model import RobotSpec
 from pathrl.sim.feedback import USABLE_HALF, FeedbackStep, PlateDrive, PlateIMU, ball_observation
+from pathrl.sim.standing import BASE_POS_SCALE, FALL_TILT_RAD, standing_observation, standing_values
 
 __all__ = ["BASE_POS_SCALE", "PyBulletBall", "PyBulletStanding", "ScenePool"]
-
-#: Free-standing robot: observation scales (the authors' normalization) and the fall threshold.
-BASE_POS_SCALE = 0.2 / math.sqrt(3.0)  # m
-BASE_TILT_SCALE = 0.125  # rad
-FALL_TILT_RAD = math.radians(30.0)
 
 
 def _make_scene(kind: str, robot: RobotSpec, seed: int, control_rate: float):
@@ -294,13 +291,8 @@ class PyBulletStanding(_PooledFeedback):
 
     def values(self) -> dict[str, Tensor]:
         """Task values (N,): base_tilt (rad), base_offset (m), base_orientation (0..1) and upright (1/0)."""
-        r = self.reading
-        orient = torch.arccos(r[:, 6].abs().clamp(max=1.0)) * 2.0 / math.pi
-        return {"base_tilt": r[:, 7], "base_offset": r[:, :3].norm(dim=1), "base_orientation": orient,
-                "upright": self.ok.to(torch.float64)}
+        return standing_values(self.reading, self.ok)
 
     def observe(self) -> Tensor:
-        """The pelvis part of the state (N, 8) in [-1, 1] (class docstring)."""
-        r = self.reading
-        tilt = 2.0 * r[:, 7:8] / BASE_TILT_SCALE - 1.0
-        return torch.cat([r[:, :3] / BASE_POS_SCALE, r[:, 3:7], tilt], dim=1).clamp(-1.0, 1.0)
+        """The pelvis part of the state (N, 8) in [-1, 1] (class docstring; :func:`standing_observation`)."""
+        return standing_observation(self.reading)
