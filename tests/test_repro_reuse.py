@@ -179,3 +179,20 @@ def test_trueadapt_evaluation_records_its_inputs(tmp_path: Path, monkeypatch):
     files = json.loads((tmp_path / "raw" / a.id / "inputs.json").read_text())["files"]
     assert len(runs) == 1 and sorted(files) == ["datasets/iiwa7/trueadapt_on_plate/dataset.json",
                                                 "datasets/iiwa7/trueadapt_on_plate/test.npz"]
+
+
+def test_train_jobs_train_a_generalization_row_on_its_train_dataset(monkeypatch):
+    """--train: Table IV's rows train on their train_dataset (random_broad), not on the target point paths they are
+    evaluated on; a generalization row without one and a second test split train nothing themselves."""
+    from pathrl.repro.tables import ROWS, TABLE_IV, Evaluation
+
+    tool = _tool(monkeypatch)
+    evals = [r.evaluation for r in ROWS if r.table == TABLE_IV]
+    jobs = tool.training_jobs(evals)
+    assert jobs["iiwa7_random_broad_track_distill"].dataset == "random_broad"
+    assert jobs["armar4_random_broad_track_distill"].dataset == "random_broad"
+    assert not any(e.dataset == "target_point" for e in jobs.values())
+    assert "iiwa7_random" not in jobs  # trained by its own rows (Tables I-III), not on target points
+    plain = Evaluation("iiwa7_random", "iiwa7", "random")
+    assert tool.training_jobs([plain, Evaluation("x", "iiwa7", "random", second_test_set=True)]) == \
+        {"iiwa7_random": plain}

@@ -166,14 +166,7 @@ def build_plan(args: argparse.Namespace, profile: Profile, lay: Layout) -> Plan:
             for robot, name, test_dir in sorted(needed):
                 plan.add("prepare", f"dataset {robot}/{test_dir}", lambda robot=robot, name=name, test_dir=test_dir:
                          tiny_dataset(robot, name, test_dir, profile, lay, args.reuse, logs))
-        trained = {}
-        for e in evals:
-            if e.generalization or e.second_test_set or e.model in CONTROLLER_MODELS:  # controllers: not trained
-                continue
-            for source in warm_chain(e.model):  # a warm start's sources first: it starts from their shipped weights
-                trained.setdefault(source, replace(e, model=source))
-            trained.setdefault(e.model, e)
-        for model, e in trained.items():
+        for model, e in training_jobs(evals).items():
             plan.add("prepare", f"train {model}", lambda model=model, e=e: train_and_ship(model, e, profile, lay, logs))
     # The simulated (PyBullet) evaluations, the longest steps, first: the concurrent phase then ends with
     # short steps on every lane.
@@ -295,6 +288,22 @@ def path_change(key: str, model: str, split: str, profile: Profile, lay: Layout,
     sh([sys.executable, "-m", "pathrl.eval.path_change", str(lay.models / model), str(lay.test_data / split),
         str(out), "--episodes", str(episodes)], logs / f"{out.stem}.log")
     record(out, inputs)
+
+
+def training_jobs(evals: list[Evaluation]) -> dict[str, Evaluation]:
+    """{model: the evaluation whose robot and dataset it trains on} for --train, a warm start's sources before it.
+    Controllers and second-test-set rows train nothing; a generalization row trains on its ``train_dataset`` (none
+    given: its policy is trained by another row)."""
+    trained: dict[str, Evaluation] = {}
+    for e in evals:
+        if e.generalization and e.train_dataset:
+            e = replace(e, dataset=e.train_dataset, generalization=False, train_dataset=None)
+        if e.generalization or e.second_test_set or e.model in CONTROLLER_MODELS:
+            continue
+        for source in warm_chain(e.model):  # a warm start's sources first: it starts from their shipped weights
+            trained.setdefault(source, replace(e, model=source))
+        trained.setdefault(e.model, e)
+    return trained
 
 
 def train_and_ship(model: str, e: Evaluation, profile: Profile, lay: Layout, logs: Path) -> None:

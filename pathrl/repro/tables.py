@@ -40,6 +40,7 @@ class Evaluation:
     knots: str = "curvature_9"
     segments: str = "paper"  # paper (random segments) | full (whole paths)
     generalization: bool = False  # evaluated on another dataset than the one it was trained on
+    train_dataset: str | None = None  # generalization: the dataset the policy trains on (make reproduce-tables --train)
     task: str | None = None  # evaluated with this feedback task in PyBullet (e.g. ball_on_plate)
     episodes: int | None = None  # default: 1200 paper segments, or every path once for segments=full
     open_loop: bool = False  # the task's sensor frozen at its first value (does the policy use the feedback?)
