@@ -50,13 +50,18 @@ def _follow(follower: Follower, decisions: int = 400) -> tuple[torch.Tensor, tor
     q, v, a = (torch.as_tensor(x).unsqueeze(0) for x in follower.state)
     ps, vs, accs = [q], [v], [a]
     for _ in range(decisions):
-        sp = follower.decide()
-        ps.append(torch.as_tensor(sp.position))
-        vs.append(torch.as_tensor(sp.velocity))
-        accs.append(torch.as_tensor(sp.acceleration))
+        _decide_into(follower, ps, vs, accs)
         if follower.done:
             break
     return torch.cat(ps), torch.cat(vs), torch.cat(accs)
+
+
+def _decide_into(follower: Follower, ps: list, vs: list, accs: list) -> None:
+    """One decision; its setpoints appended to the position, velocity and acceleration lists."""
+    sp = follower.decide()
+    ps.append(torch.as_tensor(sp.position))
+    vs.append(torch.as_tensor(sp.velocity))
+    accs.append(torch.as_tensor(sp.acceleration))
 
 
 def _violations(follower: Follower, p, v, a) -> dict[str, int]:
@@ -230,10 +235,7 @@ def test_a_stop_or_path_change_during_the_final_approach_stays_inside_every_limi
                         assert "final approach" in str(exc)
                         assert all(np.array_equal(x, y) for x, y in zip(before, follower.state, strict=True))
                         refused += 1
-            sp = follower.decide()
-            ps.append(torch.as_tensor(sp.position))
-            vs.append(torch.as_tensor(sp.velocity))
-            accs.append(torch.as_tensor(sp.acceleration))
+            _decide_into(follower, ps, vs, accs)
             if follower.done:
                 break
         assert follower.done and at is not None
@@ -314,12 +316,17 @@ def test_a_clipped_path_set_starts_and_stays_inside_every_limit(refuse, tmp_path
     gen = torch.Generator().manual_seed(1)
     env.start_segments(torch.arange(n), sample_segments(paths, torch.arange(n) % paths.num_paths, gen))
     assert bool(((env.pos >= lo) & (env.pos <= hi)).all())  # every episode starts inside
-    steps = []
-    for _ in range(40):
+    _random_steps_inside(env, robot, gen, 40)
+
+
+def _random_steps_inside(env: PathTrackingEnv, robot, gen: torch.Generator, steps: int) -> None:
+    """`steps` env steps of random actions; every 240 Hz setpoint of every env inside every limit."""
+    n, cfg, parts = env.num_envs, env.cfg, []
+    for _ in range(steps):
         p0, v0, a0 = env.pos.clone(), env.vel.clone(), env.acc.clone()
         env.step(torch.rand(n, robot.dof, generator=gen, dtype=torch.float64) * 2 - 1)
-        steps.append(interpolate_step(p0, v0, a0, env.acc, cfg.dt, env.control_steps))
-    p, v, a = (torch.cat(parts, dim=1) for parts in zip(*steps, strict=True))
+        parts.append(interpolate_step(p0, v0, a0, env.acc, cfg.dt, env.control_steps))
+    p, v, a = (torch.cat(x, dim=1) for x in zip(*parts, strict=True))
     counts = limit_violations(p, v, a, JointLimits.from_robot(robot), 1.0 / cfg.control_rate)
     assert int(counts["total"].sum()) == 0, {k: int(c.sum()) for k, c in counts.items()}
 
@@ -345,14 +352,7 @@ def _env_setpoints_inside(robot, paths, gen: torch.Generator, steps: int = 25) -
     env.start_segments(torch.arange(half, n), full_segments(paths, ids[half:]))
     lo, hi = (torch.as_tensor(x) for x in robot.pos_limits.T)
     assert bool(((env.pos >= lo - 1e-9) & (env.pos <= hi + 1e-9)).all())
-    parts = []
-    for _ in range(steps):
-        p0, v0, a0 = env.pos.clone(), env.vel.clone(), env.acc.clone()
-        env.step(torch.rand(n, robot.dof, generator=gen, dtype=torch.float64) * 2 - 1)
-        parts.append(interpolate_step(p0, v0, a0, env.acc, cfg.dt, env.control_steps))
-    p, v, a = (torch.cat(x, dim=1) for x in zip(*parts, strict=True))
-    counts = limit_violations(p, v, a, JointLimits.from_robot(robot), 1.0 / cfg.control_rate)
-    assert int(counts["total"].sum()) == 0, {k: int(c.sum()) for k, c in counts.items()}
+    _random_steps_inside(env, robot, gen, steps)
 
 
 @settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
