@@ -24,7 +24,7 @@ def test_cells_from_the_files(tmp_path):
     (r,) = table.rows(tmp_path)
     assert r["ratio"] == 2.3 / 2.0 and r["timeouts"] == 25.0 and r["minutes"] == 10.0
     md = table.markdown([r])
-    assert "| arm | 4 | 2.30 | 2.00 | 1.15 | 1.50 / 4.00 | 25.0 | 0 | 10.0, 800, 13.1 | yes |" in md
+    assert "| arm | random | 4 | 2.30 | 2.00 | 1.150 | 1.50 / 4.00 | 25.0 | 0 | 10.0, 800, 13.1 | yes |" in md
     md_slow = table.markdown([{**r, "minutes": 16.0}])
     assert md_slow.rstrip().endswith("| no |")
 

@@ -28,7 +28,8 @@ def rows(folder: Path) -> list[dict[str, float | str | int]]:
         m = json.loads(student.read_text())
         tp = json.loads((folder / f"{robot}_toppra.json").read_text())
         tr = json.loads((folder / f"{robot}_training.json").read_text())
-        out.append({"robot": robot, "episodes": m["episodes"], "duration_s": m["duration_s"],
+        out.append({"robot": robot, "trained_on": tr.get("dataset", "random"), "episodes": m["episodes"],
+                    "duration_s": m["duration_s"],
                     "toppra_s": tp["toppra_duration_s"], "ratio": m["duration_s"] / tp["toppra_duration_s"],
                     "cm": m["cart_pos_dev_mean_cm"], "cm_max": m["cart_pos_dev_max_cm"],
                     "timeouts": time_out_pct(m),
@@ -41,17 +42,19 @@ def markdown(rs: list[dict[str, float | str | int]]) -> str:
     """The table with the bars beside it."""
     lines = ["# Students of new robots against TOPP-RA", "",
              "Written by `tools/your_robot_table.py` from the files beside it. The Table I recipe "
-             "(`+experiment=iiwa7_random_track_distill`, DAgger from the law tracker) on each robot's generated random "
-             "paths (`pathrl-dataset generate robot=<robot> dataset=random`, seed 0), evaluated on the 1200 paper "
-             "segments of their test split (deterministic, 240 Hz limit check) and TOPP-RA on the same segments. "
+             "(`+experiment=iiwa7_random_track_distill`, DAgger from the law tracker) trained on each robot's "
+             "generated paths (*trained on*: `pathrl-dataset generate robot=<robot> dataset=<it>`, seed 0), evaluated "
+             "on the 1200 paper segments of the test split of its `dataset=random` paths (deterministic, 240 Hz limit "
+             "check) and TOPP-RA on the same segments. "
              f"Bars: <= {BAR_RATIO}x TOPP-RA, <= {BAR_CM} cm mean deviation, trained in <= {BAR_MIN:.0f} min.", "",
-             "| robot | episodes | duration (s) | TOPP-RA (s) | x TOPP-RA | mean / max deviation (cm) | "
+             "| robot | trained on | episodes | duration (s) | TOPP-RA (s) | x TOPP-RA | mean / max deviation (cm) | "
              "time-outs (%) | limit violations | training (min, iterations, M steps) | bars met |",
-             "|---|---|---|---|---|---|---|---|---|---|"]
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rs:
         ok = r["ratio"] <= BAR_RATIO and r["cm"] <= BAR_CM and r["minutes"] <= BAR_MIN and r["violations"] == 0
-        lines.append(f"| {r['robot']} | {r['episodes']} | {r['duration_s']:.2f} | {r['toppra_s']:.2f} | "
-                     f"{r['ratio']:.2f} | {r['cm']:.2f} / {r['cm_max']:.2f} | {r['timeouts']:.1f} | "
+        lines.append(f"| {r['robot']} | {r['trained_on']} | {r['episodes']} | {r['duration_s']:.2f} | "
+                     f"{r['toppra_s']:.2f} | "
+                     f"{r['ratio']:.3f} | {r['cm']:.2f} / {r['cm_max']:.2f} | {r['timeouts']:.1f} | "
                      f"{r['violations']} | {r['minutes']:.1f}, {r['iterations']}, {r['env_steps_m']:.1f} | "
                      f"{'yes' if ok else 'no'} |")
     return "\n".join(lines) + "\n"
