@@ -95,10 +95,10 @@ def test_train_missing_dataset(tmp_path):
 
 @pytest.fixture(scope="module")
 def off_limits_dataset(tmp_path_factory):
-    """Knots 1000x outside the joint limits (a unit mix-up in an import), and one 3 mrad outside."""
+    """Knots 10x outside the joint limits (a unit slip; 1000x, mrad for rad, is refused when saved: beyond 100 rad)."""
     robot = load_robot_by_name("iiwa7")
     paths = smooth_paths(robot, 3, 0)
-    paths[0] = (paths[0][0], paths[0][1] * 1000.0)
+    paths[0] = (paths[0][0], paths[0][1] * 10.0)
     dest = tmp_path_factory.mktemp("off") / "d"
     meta = {"robot": "iiwa7", "kind": "synthetic", "path_joints": list(robot.path_joints), "seed": 0}
     save_dataset(dest, {"train": paths, "test": paths}, meta)
