@@ -49,8 +49,9 @@ if TYPE_CHECKING:
     from pathrl.robot.model import RobotSpec
 
 __all__ = ["CACHE_DIR", "Dataset", "DatasetError", "FORMAT", "MAX_KNOT_RAD", "MAX_PATH_LENGTH_RAD", "OUT_OF_LIMITS",
-           "Split", "apply_strategy", "cache_path", "check_destination", "check_limits", "content_hash", "load_dataset",
-           "load_pathset", "pack", "read_cache", "save_dataset", "strategy_key", "unpack", "write_cache"]
+           "Split", "apply_strategy", "bounds_problem", "cache_path", "check_destination", "check_limits",
+           "content_hash", "load_dataset", "load_pathset", "pack", "read_cache", "save_dataset", "strategy_key",
+           "unpack", "write_cache"]
 
 FORMAT = "pathrl-dataset/1"
 #: Bounds on any stored or imported path, checked before anything is resampled or tabulated: far beyond any robot's
@@ -151,6 +152,18 @@ def content_hash(split_arrays: Mapping[str, Mapping[str, np.ndarray]]) -> str:
 # validation
 
 
+def bounds_problem(knots: np.ndarray) -> str | None:
+    """Why the finite knots (K, M) are beyond :data:`MAX_KNOT_RAD` or their polyline beyond
+    :data:`MAX_PATH_LENGTH_RAD` (checked before anything is tabulated), or None."""
+    largest = float(np.abs(knots).max())
+    if largest > MAX_KNOT_RAD:
+        return f"knot {largest:.3g} rad is beyond {MAX_KNOT_RAD:g} rad (not joint angles in rad?)"
+    length = float(np.linalg.norm(np.diff(knots, axis=0), axis=1).sum())
+    if length > MAX_PATH_LENGTH_RAD:
+        return f"its knots span {length:.3g} rad; at most {MAX_PATH_LENGTH_RAD:g} rad"
+    return None
+
+
 def _validate_paths(split: str, paths: Sequence[tuple[str, np.ndarray]], where: str) -> None:
     seen: set[str] = set()
     m = None
@@ -169,13 +182,9 @@ def _validate_paths(split: str, paths: Sequence[tuple[str, np.ndarray]], where: 
             raise DatasetError(f"{where}: split {split!r}: path {name!r} has {k.shape[1]} joints, others {m}")
         if not np.all(np.isfinite(k)):
             raise DatasetError(f"{where}: split {split!r}: path {name!r}: knots contain NaN or inf")
-        if np.abs(k).max() > MAX_KNOT_RAD:
-            raise DatasetError(f"{where}: split {split!r}: path {name!r}: knot {np.abs(k).max():.3g} rad is beyond "
-                               f"{MAX_KNOT_RAD:g} rad (not joint angles in rad?)")
-        length = float(np.linalg.norm(np.diff(k, axis=0), axis=1).sum())
-        if length > MAX_PATH_LENGTH_RAD:
-            raise DatasetError(f"{where}: split {split!r}: path {name!r} is {length:.3g} rad long; at most "
-                               f"{MAX_PATH_LENGTH_RAD:g} rad are loaded")
+        problem = bounds_problem(k)
+        if problem:
+            raise DatasetError(f"{where}: split {split!r}: path {name!r}: {problem}")
         try:
             dedupe_knots(k)
         except PathError as exc:
@@ -439,20 +448,19 @@ def apply_strategy(dataset: Dataset, split: str, knots: KnotStrategy, use_cache:
 OUT_OF_LIMITS = ("refuse", "clip")
 
 
-def check_limits(dataset: Dataset, split: str, robot: RobotSpec, out_of_limits: str) -> bool:
-    """Whether the split's paths must be clipped (``clip``, with a one-line warning); with ``refuse`` a path that
-    leaves the robot's position limits is a :class:`DatasetError`."""
+def check_limits(dataset: Dataset, split: str, robot: RobotSpec, out_of_limits: str) -> None:
+    """Knots of the split outside the robot's position limits: a :class:`DatasetError` with ``refuse``, a one-line
+    warning with ``clip`` (the caller clips)."""
     if out_of_limits not in OUT_OF_LIMITS:
         raise DatasetError(f"dataset.out_of_limits must be one of {list(OUT_OF_LIMITS)}, got {out_of_limits!r}")
     ex = limit_excess(dataset.splits[split].knots, robot)
     if not ex["paths_outside"]:
-        return False
+        return
     what = (f"{dataset.path}: split {split!r}: {ex['paths_outside']} of {ex['paths']} paths leave robot "
             f"{robot.name!r}'s position limits (by up to {1e3 * ex['max_excess_rad']:.3g} mrad, joint {ex['joint']})")
     if out_of_limits == "refuse":
         raise DatasetError(f"{what}; pass dataset.out_of_limits=clip to clip their knots into the limits")
     print(f"warning: {what}; their splines are clipped into the limits", file=sys.stderr)
-    return True
 
 
 def load_pathset(
@@ -475,8 +483,9 @@ def load_pathset(
         raise DatasetError(f"{dataset.path}: no split {split!r} (has {sorted(dataset.splits)})")
     if not len(dataset.splits[split]):
         raise DatasetError(f"{dataset.path / (split + '.npz')}: split {split!r} is empty")
-    # clip: also a spline that leaves the range between knots that are all inside
-    clip = robot is not None and (check_limits(dataset, split, robot, out_of_limits) or out_of_limits == "clip")
+    if robot is not None:
+        check_limits(dataset, split, robot, out_of_limits)
+    clip = robot is not None and out_of_limits == "clip"  # also a spline leaving the range between inside knots
     resampled = apply_strategy(dataset, split, knots)
     paths = build_pathset(resampled, dataset.splits[split].names, table_step=table_step)
     if robot is None:

@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from pathrl.dataset.io import MAX_KNOT_RAD, MAX_PATH_LENGTH_RAD, OUT_OF_LIMITS
+from pathrl.dataset.io import OUT_OF_LIMITS, bounds_problem
 from pathrl.deploy.approach import Approach, plan_approach
 from pathrl.envs.registry import EVAL_ENV, get_task
 from pathrl.envs.rewards import build_reward_terms
@@ -46,8 +46,8 @@ from pathrl.paths.segments import full_segments
 from pathrl.robot.model import RobotSpec, load_robot
 from pathrl.runs import RunError, load_policy, load_run, policy_scale
 
-__all__ = ["MAX_KNOT_RAD", "MAX_PATH_RAD", "MEASURED_TOLERANCE", "ON_MEASURED", "SETTLE_TOLERANCE", "START_TOLERANCE",
-           "Follower", "FollowerError", "PreparedPath", "Setpoints"]
+__all__ = ["MEASURED_TOLERANCE", "ON_MEASURED", "SETTLE_TOLERANCE", "START_TOLERANCE", "Follower", "FollowerError",
+           "PreparedPath", "Setpoints"]
 
 
 #: Largest weighted joint distance (rad) between the robot and the start of a path it is asked to follow.
@@ -60,9 +60,6 @@ TAKEOVER_ARC = 0.25
 MEASURED_TOLERANCE = 0.05
 #: What ``decide(q_measured=...)`` does beyond the tolerance: raise a FollowerError (nothing moves) or warn.
 ON_MEASURED = ("refuse", "warn")
-#: Largest |knot| (rad) and knot polyline length (rad) of a path, checked before it is tabulated: the dataset
-#: import's bounds, far beyond any joint range; knots in degrees or mm would take seconds to minutes and gigabytes.
-MAX_PATH_RAD = MAX_PATH_LENGTH_RAD
 
 
 class FollowerError(ValueError):
@@ -188,12 +185,9 @@ class Follower:
             raise FollowerError(f"path knots must be (K >= 2, {m}), got {knots.shape}")
         if not np.isfinite(knots).all():
             raise FollowerError("path knots must be finite")
-        if np.abs(knots).max() > MAX_KNOT_RAD:
-            raise FollowerError(f"path knot {np.abs(knots).max():.3g} rad is beyond {MAX_KNOT_RAD:g} rad (not joint "
-                                "positions in rad?)")
-        length = float(np.linalg.norm(np.diff(knots, axis=0), axis=1).sum())
-        if length > MAX_PATH_RAD:
-            raise FollowerError(f"the path's knots span {length:.3g} rad; at most {MAX_PATH_RAD:g} rad (split it)")
+        problem = bounds_problem(knots)  # before tabulation: knots in degrees or mm would take minutes and gigabytes
+        if problem:
+            raise FollowerError(f"path: {problem}")
         try:  # the dataset pipeline's knot strategy and table, computed faster (pathrl.paths.quick)
             resampled = quick_knots(self.knots, knots)
             paths = quick_pathset(resampled)
