@@ -105,7 +105,7 @@ def _measured_decide(follower: Follower, rng: np.random.Generator, res: Follower
     try:
         sp = follower.decide(q_measured=q)
     except FollowerError:
-        unchanged = all(np.array_equal(x, y) for x, y in zip(before, follower.state, strict=True))
+        unchanged = _unchanged(follower, before)
         res.measured_refused += refuse and unchanged
         res.measured_mishandled += not (refuse and unchanged)
         return None
@@ -120,7 +120,7 @@ def _change_path(follower: Follower, knots: np.ndarray, res: FollowerFuzz) -> No
     try:
         follower.replace_path(np.vstack([before[0][follower.robot.path_index], knots]))
     except FollowerError:
-        if not all(np.array_equal(x, y) for x, y in zip(before, follower.state, strict=True)):
+        if not _unchanged(follower, before):
             raise
         res.path_changes_refused += 1
 
@@ -173,8 +173,13 @@ def _bad_state_refused(follower: Follower, knots: np.ndarray, rng: np.random.Gen
     try:
         follower.reset(knots, q=q)
     except FollowerError:
-        return all(np.array_equal(x, y) for x, y in zip(before, follower.state, strict=True))
+        return _unchanged(follower, before)
     return False
+
+
+def _unchanged(follower: Follower, before: list[np.ndarray]) -> bool:
+    """Whether the follower's commanded state (position, velocity, acceleration) equals `before` exactly."""
+    return all(np.array_equal(x, y) for x, y in zip(before, follower.state, strict=True))
 
 
 def fuzz_follower(model: str | Path, trials: int, seed: int = 0, decisions: int = 150) -> FollowerFuzz:

@@ -12,6 +12,8 @@ from typing import Self
 import numpy as np
 import pybullet as p
 
+from pathrl.robot.bodies import resolve_mesh
+
 __all__ = ["FixedBaseScene", "MotorScene", "collision_only_urdf", "load_urdf", "load_urdf_text", "z_tilt_deg"]
 
 
@@ -34,12 +36,10 @@ def collision_only_urdf(urdf: Path) -> str:
             link.remove(visual)
 
     def resolve(match: re.Match) -> str:
-        name = match.group(1)
-        if name.startswith("package://"):
-            rest = name.removeprefix("package://")
-            found = [base / rest for base in (urdf.parent, *urdf.parents) if (base / rest).is_file()]
-            return f'filename="{found[0]}"' if found else match.group(0)  # PyBullet reports a missing mesh
-        return f'filename="{urdf.parent / name}"'
+        try:
+            return f'filename="{resolve_mesh(urdf, match.group(1))}"'
+        except FileNotFoundError:
+            return match.group(0)  # PyBullet reports a missing mesh
 
     return re.sub(r'filename="([^"/][^"]*)"', resolve, ET.tostring(root, encoding="unicode"))
 

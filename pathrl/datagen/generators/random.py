@@ -31,9 +31,11 @@ class _RandomPolicy:
 
     def __init__(self, ctx: GeneratorContext, p: Mapping[str, Any], n: int, tgen: torch.Generator):
         lo, hi = smoothing_range(p["action_smoothing"])
-        self.rho = None if hi == 0 else torch.full((n, 1), lo, dtype=torch.float64)  # (n, 1); None: independent
-        if hi > lo:  # a fixed rho draws nothing: the stream of a fixed-rho dataset is unchanged
+        self.rho: torch.Tensor | None = None  # (n, 1); None: independent actions
+        if hi > lo:
             self.rho = draw_smoothing(lo, hi, n, tgen)
+        elif hi > 0:  # a fixed rho draws nothing: the stream of a fixed-rho dataset is unchanged
+            self.rho = torch.full((n, 1), lo, dtype=torch.float64)
         self.ck_steps = int(p["checkpoint_steps"])
         self.tgen = tgen
         self.prev = torch.zeros(n, ctx.spec.dof, dtype=torch.float64)
