@@ -197,6 +197,9 @@ def test_training_record_names_the_method_from_the_shipped_config(tmp_path):
     assert training_method({"residual": {"scale": 0.25, "controller": {"name": "tray"}}}) \
         == "PPO residual over tray, from scratch"
     assert training_record(student)["method"] == "DAgger from law_tracker"
+    assert training_method({"agent": {"algorithm": {"class_name": "Distillation"}},
+                            "teacher": {"name": "balance", "policy": "models/upper_body"}}) \
+        == "DAgger from balance around upper_body"
     assert training_record(tmp_path / "nothing") is None
     assert training_method({"controller": {"name": "greedy"}, "agent": {"algorithm": {"class_name": "PPO"}}}) \
         == "not trained (greedy)"

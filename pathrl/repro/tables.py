@@ -190,7 +190,8 @@ def warm_chain(model: str) -> list[str]:
 def training_method(cfg: dict[str, Any]) -> str:
     """How the policy of a run config was trained: ``PPO from scratch``, ``PPO from <model>`` for a warm start
     (``init_from``), ``PPO residual over <controller>, from ...`` for a residual policy (it runs beside the controller),
-    ``DAgger from <teacher>`` for a distilled student, ``not trained (<controller>)`` for a
+    ``DAgger from <teacher>`` for a distilled student (``DAgger from <teacher> around <model>`` when the teacher
+    wraps a shipped policy), ``not trained (<controller>)`` for a
     model-based controller's directory, ``<controller> around <model>`` for a controller that wraps a shipped
     policy."""
     controller = cfg.get("controller")
@@ -200,7 +201,9 @@ def training_method(cfg: dict[str, Any]) -> str:
         return f"{name} around {Path(policy).name}" if policy else f"not trained ({name})"
     algorithm = ((cfg.get("agent") or {}).get("algorithm") or {}).get("class_name", "PPO")
     if algorithm == "Distillation":
-        return f"DAgger from {(cfg.get('teacher') or {}).get('name', 'a controller')}"
+        teacher = cfg.get("teacher") or {}
+        around = f" around {Path(teacher['policy']).name}" if teacher.get("policy") else ""
+        return f"DAgger from {teacher.get('name', 'a controller')}{around}"
     start = cfg.get("init_from")
     origin = f"from {Path(str(start)).name if start else 'scratch'}"
     residual = (cfg.get("residual") or {}).get("controller")
