@@ -16,7 +16,7 @@ from pathrl.cli.common import compose, to_container
 from pathrl.dataset.io import load_dataset
 from pathrl.envs.path_change_cfg import PathChangeCfg
 from pathrl.envs.path_changes import PathChanges, with_path_changes
-from pathrl.envs.registry import make_env
+from pathrl.envs.registry import EnvRequest, make_env
 from pathrl.eval.path_change import branch
 from pathrl.limits.check import limit_violations
 from pathrl.limits.feasible import JointLimits
@@ -118,7 +118,7 @@ def test_off_is_the_env_itself_and_configs_compose(setup, cfg):
     assert {**group, "offsets": [0.3], "ramps": [1.0]} == cfg["path_change"]  # the experiment keeps gentle changes
     assert cfg["path_change"]["enabled"] and cfg["init_from"] == "models/iiwa7_random_continue"
     assert cfg["iterations"] == 200
-    env = make_env(plain, "train", num_envs=2, seed=0, paths=paths, robot=robot)
+    env = make_env(plain, EnvRequest(num_envs=2, seed=0, paths=paths, robot=robot))
     assert with_path_changes(plain, env) is env
     assert with_path_changes({**plain, "path_change": {"enabled": False}}, env) is env
     assert env.sample_paths is None
@@ -130,7 +130,7 @@ def test_off_is_the_env_itself_and_configs_compose(setup, cfg):
 
 def _wrapped(cfg, setup, n: int, seed: int, **pc) -> PathChanges:
     robot, paths = setup
-    env = make_env(cfg, "train", num_envs=n, seed=seed, paths=paths, robot=robot, max_deviation=None)
+    env = make_env(cfg, EnvRequest(num_envs=n, seed=seed, paths=paths, robot=robot), max_deviation=None)
     return PathChanges(env, PathChangeCfg(enabled=True, **pc))
 
 
