@@ -234,7 +234,7 @@ def toppra_replan(follower: Follower, knots: list[np.ndarray], episodes: int, se
     rest: ``duration_s`` from the change to rest at the end, ``solve_ms``, ``violations`` (TOPP-RA's own; it
     has no jerk limit).
     """
-    from pathrl.baselines.toppra import solve_segment
+    from pathrl.baselines.toppra import PathLimits, ToppraSettings, solve_segment
     from pathrl.paths.spline import fit_spline
 
     rng = np.random.default_rng(seed)
@@ -248,8 +248,8 @@ def toppra_replan(follower: Follower, knots: list[np.ndarray], episodes: int, se
         _run(follower, k, [], None)
         direction = rng.standard_normal(follower.robot.path_dof)
         idx = follower.env.path_index.numpy()
-        vel, acc, pos = lim.vel[idx].numpy(), lim.acc[idx].numpy(), lim.pos[idx].numpy()
-        rate = follower.env_cfg.control_rate
+        limits = PathLimits(lim.vel[idx].numpy(), lim.acc[idx].numpy(), lim.pos[idx].numpy())
+        settings = ToppraSettings(control_rate=follower.env_cfg.control_rate, keep_trajectory=False)
         new = _switch(direction, follower, offset_rad, ramp_rad)
         spline = fit_spline(new)
         tangent = spline(0.0, 1)
@@ -257,14 +257,13 @@ def toppra_replan(follower: Follower, knots: list[np.ndarray], episodes: int, se
         v = follower.state[1][idx]
         along = float(v @ tangent)
         _, length = knot_arc_lengths(new)
-        moving = solve_segment(new, 0.0, length, vel, acc, pos, rate, keep_trajectory=False,
-                               start_rate=max(along, 0.0))
+        moving = solve_segment(new, 0.0, length, limits, settings, start_rate=max(along, 0.0))
         follower.stop()
         braking: list = []
         _run(follower, 100, braking, None)
         rest = _switch(direction, follower, offset_rad, ramp_rad)
         _, length = knot_arc_lengths(rest)
-        res = solve_segment(rest, 0.0, length, vel, acc, pos, rate, keep_trajectory=False)
+        res = solve_segment(rest, 0.0, length, limits, settings)
         rows.append({"path": a, "switch_s": k * dt, "from_motion_feasible": moving.status != "infeasible",
                      "normal_speed": float(np.linalg.norm(v - along * tangent)), "braking_s": len(braking) * dt,
                      "solve_ms": 1e3 * res.solve_time_s, "duration_s": len(braking) * dt + res.duration_s,
