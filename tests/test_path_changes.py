@@ -21,7 +21,7 @@ from pathrl.eval.path_change import branch
 from pathrl.limits.check import limit_violations
 from pathrl.limits.feasible import JointLimits
 from pathrl.limits.integrate import interpolate_step
-from pathrl.paths.branch import branch_knots, dedupe_padded, tabulate_batch
+from pathrl.paths.branch import BranchShape, BranchStart, branch_knots, dedupe_padded, tabulate_batch
 from pathrl.paths.knots import KnotStrategy
 from pathrl.paths.pathset import build_pathset
 from pathrl.paths.spline import dedupe_knots
@@ -66,10 +66,12 @@ def test_batched_branch_equals_the_evaluations_branch(seed):
     q, v = torch.as_tensor(rng.normal(0, 1, (b, m))), torch.as_tensor(rng.normal(0, 1, (b, m)))
     v[0] = 0.0
     offset, ramp = torch.as_tensor(rng.normal(0, 0.4, (b, m))), torch.as_tensor(rng.uniform(0.2, 1.5, b))
-    got, count = branch_knots(ps.knots, ps.knot_s, ps.num_knots - 1, s_now, q, v, offset, ramp, torch.as_tensor(lim))
+    got, count = branch_knots(ps.knots, ps.knot_s, ps.num_knots - 1, BranchStart(s_now, q, v),
+                              BranchShape(offset, ramp, torch.as_tensor(lim)))
     for i in range(b):
         knots = ps.knots[i, : int(ps.num_knots[i])].numpy()
-        ref = branch(knots, float(s_now[i]), q[i].numpy(), v[i].numpy(), offset[i].numpy(), float(ramp[i]), lim)
+        start = BranchStart(float(s_now[i]), q[i].numpy(), v[i].numpy())
+        ref = branch(knots, start, BranchShape(offset[i].numpy(), float(ramp[i]), lim))
         n = int(count[i])
         assert ref.shape == (n, m)
         np.testing.assert_allclose(got[i, :n].numpy(), ref, rtol=0, atol=1e-12)
