@@ -1,4 +1,4 @@
-"""``pathrl-industrial``: motion-profile optimisation on the simulated industrial controller (issue 21).
+"""``pathrl-industrial``: motion-profile optimisation on the simulated industrial controller.
 
     pathrl-industrial table2 [key=value ...]   baseline + MPGD per evaluation trajectory -> out_table2 (Table II)
     pathrl-industrial speed  [key=value ...]   IWA + bisection on the speed command -> out_speed (cf. Table III)

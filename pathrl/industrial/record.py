@@ -1,4 +1,4 @@
-"""One waypoint optimisation (issue 21) with every execution kept, written to ``industrial.mcap`` for ``pathrl-view``.
+"""One waypoint optimisation with every execution kept, written to ``industrial.mcap`` for ``pathrl-view``.
 
 ``pathrl-industrial record traj=<row> method=mpgd|rl [policy=RUN_DIR] out=DIR`` runs the optimisation Table II
 runs for that row (:func:`pathrl.industrial.experiments.run_table2`: the baseline profile of ``waypoints`` MoveL
