@@ -110,3 +110,24 @@ def test_evaluating_a_shipped_model_writes_outside_models(tmp_path, monkeypatch,
     assert main([*args, "out=models/mine", "write_models=true"]) == 0
     assert (tmp_path / "models" / "mine" / "metrics.json").is_file()
     assert os.listdir(tmp_path / "models" / "mine") == ["metrics.json"]
+
+
+def test_the_library_evaluation_of_a_shipped_model_writes_outside_models(tmp_path, monkeypatch):
+    """:func:`pathrl.eval.evaluate.evaluate` as pathrl-eval: a shipped model's metrics go to runs/eval/<name> by
+    default, and an out_dir inside models/ is refused (before any work) unless write_models."""
+    from pathrl.eval.evaluate import EvalOptions, evaluate, output_dir_of
+    from pathrl.runs import RunError
+
+    monkeypatch.chdir(tmp_path)
+    model = ROOT / "models" / "iiwa7_random"
+    assert output_dir_of(model) == Path("runs", "eval", "iiwa7_random")
+    assert output_dir_of(tmp_path / "run") == tmp_path / "run"
+    assert output_dir_of(model, tmp_path / "e") == tmp_path / "e"
+    before = _listing(ROOT / "models")
+    with pytest.raises(RunError, match="write_models"):
+        evaluate(model, EvalOptions(out_dir=model))
+    opts = EvalOptions(dataset_path=str(ROOT / "datasets" / "iiwa7" / "random"), episodes=2, num_envs=2,
+                       record=False, progress=False)
+    assert evaluate(model, opts)["episodes"] == 2
+    assert (tmp_path / "runs" / "eval" / "iiwa7_random" / "metrics.json").is_file()
+    assert _listing(ROOT / "models") == before

@@ -203,10 +203,12 @@ def test_settle_against_the_control_by_hand():
 
 def test_branch_starts_at_the_robot_in_its_direction_and_ends_offset():
     from pathrl.eval.path_change import branch
+    from pathrl.paths.branch import BranchShape, BranchStart
 
     knots = np.stack([np.linspace(0.0, 4.0, 9), np.zeros(9)], axis=1)  # a straight line, knots 0.5 rad apart
     lim = np.array([[-5.0, 5.0], [-0.7, 0.7]])
-    out = branch(knots, 1.0, np.array([1.0, 0.01]), np.array([2.0, 0.0]), np.array([0.0, 1.0]), 1.0, lim)
+    start = BranchStart(1.0, np.array([1.0, 0.01]), np.array([2.0, 0.0]))
+    out = branch(knots, start, BranchShape(np.array([0.0, 1.0]), 1.0, lim))
     assert out[0].tolist() == [1.0, 0.01] and out[1].tolist() == pytest.approx([1.2, 0.01])
     assert out[2, 0] == 1.5 and out[2, 1] == pytest.approx(0.5 * 0.5 * (3 - 2 * 0.5))  # smoothstep at half the ramp
     assert out[-1].tolist() == pytest.approx([4.0, 0.68])  # the whole offset (1 rad), 0.02 inside the limit

@@ -30,7 +30,7 @@ from pathrl.envs.device import (
     resolve_device,
     same_device,
 )
-from pathrl.envs.registry import EVAL_ENV, make_env
+from pathrl.envs.registry import EVAL_ENV, EnvRequest, make_env
 from pathrl.envs.state import restore, snapshot
 from pathrl.policy.residual import ControllerObs
 from pathrl.train import device_check as dc
@@ -159,7 +159,7 @@ def test_restore_puts_every_tensor_on_the_env_device(dataset):
     """A checkpoint loads to the CPU; the env it restores is elsewhere: dicts of tensors (the episode rewards) and
     the ball's state too must land on the env's device."""
     cfg, _ = dc.model_cfg(MODEL)
-    env = make_env(cfg, "train", num_envs=4, dataset_path=str(dataset), backend="analytic")
+    env = make_env(cfg, EnvRequest(num_envs=4, dataset_path=str(dataset), backend="analytic"))
     state = snapshot(env)
     assert "ep_reward" in state and "feedback" in state
     _to_meta(env, state)
@@ -188,7 +188,7 @@ def test_a_cuda_runs_checkpoint_resumes_onto_its_device(dataset, tmp_path, monke
     from pathrl.train.runner import PathRLRunner
 
     cfg, _ = dc.model_cfg(MODEL)
-    env = make_env(cfg, "train", num_envs=4, dataset_path=str(dataset), backend="analytic")
+    env = make_env(cfg, EnvRequest(num_envs=4, dataset_path=str(dataset), backend="analytic"))
     wrapper = TeacherLabels(env, make_controller(cfg["teacher"], env))
     wrapper.get_observations()
     wrapper.step(torch.zeros(env.num_envs, env.num_actions))  # a plan in progress, a label of the new state
@@ -327,12 +327,13 @@ def test_a_checkpoint_written_on_a_gpu_loads_on_the_cpu(tmp_path):
 
 
 def test_a_gpu_trained_run_evaluates_on_the_evaluation_device(dataset, tmp_path):
-    from pathrl.eval.evaluate import evaluate
+    from pathrl.eval.evaluate import EvalOptions, evaluate
 
     assert EVAL_ENV["device"] == EVAL_DEVICE == "cpu"
     model = _gpu_trained(MODEL, tmp_path / "m")
-    m = evaluate(model, dataset_path=str(dataset), episodes=2, segments="full", out_dir=tmp_path / "e", num_envs=2,
-                 record=False, progress=False, backend="analytic")  # the analytic ball was built on cfg's device
+    opts = EvalOptions(dataset_path=str(dataset), episodes=2, segments="full", out_dir=tmp_path / "e", num_envs=2,
+                       record=False, progress=False, backend="analytic")
+    m = evaluate(model, opts)  # the analytic ball was built on cfg's device
     assert m["episodes"] == 2 and m["limit_violations"] == 0
 
 

@@ -6,7 +6,7 @@ import torch
 from tensordict import TensorDict
 
 from pathrl.envs.observations import tcp_observation
-from pathrl.envs.reference import ReferencePath, ReferenceTrackingEnv
+from pathrl.envs.reference import ReferencePath, ReferenceSettings, ReferenceTrackingEnv
 from pathrl.envs.rewards import StepQuantities, build_reward_terms, path_length, tcp_deviation
 from pathrl.envs.tracking import PathTrackingEnv
 from pathrl.envs.tracking_cfg import TrackingEnvCfg
@@ -118,9 +118,9 @@ def test_matches_numpy_reference_oracle(end_obs, end_tol):
     path = ReferencePath(knots[0])
     env.start_segments(torch.tensor([0]), Segments(torch.tensor([0]), torch.zeros(1, dtype=torch.float64),
                                                    env.paths.length[[0]].clone(), env.paths.num_knots[[0]] - 1))
-    ref = ReferenceTrackingEnv(robot, path, 0.0, len(path.knots) - 1, build_reward_terms(REWARD),
-                               knot_gap=env.knot_gap, budget_steps=int(env.budget[0]), braking=brake,
-                               end_obs=end_obs, end_tolerance=end_tol)
+    settings = ReferenceSettings(env.knot_gap, budget_steps=int(env.budget[0]), end_obs=end_obs,
+                                 end_tolerance=end_tol)
+    ref = ReferenceTrackingEnv(robot, path, 0.0, len(path.knots) - 1, build_reward_terms(REWARD), settings, brake)
     rng = np.random.default_rng(0)
     np.testing.assert_allclose(env.get_observations()["policy"][0].numpy(), ref.observation(), atol=1e-5)
     for k in range(300):

@@ -18,7 +18,7 @@ from pathrl.industrial.features import (
     regions,
     rewards,
 )
-from pathrl.industrial.iwa_env import IWAEpisode
+from pathrl.industrial.iwa_env import IWAEpisode, IWASettings
 from pathrl.industrial.per import PrioritizedBuffer
 from pathrl.industrial.trajectories import evaluation_targets
 
@@ -84,7 +84,7 @@ def test_prioritized_buffer_samples_by_priority_with_importance_weights():
 
 def test_error_feedback_actions_lower_the_error_in_the_episode():
     t = evaluation_targets()[3]
-    env = IWAEpisode(t, t.speed, k_max=3)
+    env = IWAEpisode(t, t.speed, settings=IWASettings(k_max=3))
     obs = env.reset()
     assert obs.shape == (100, N_FEATURES) and np.isfinite(obs).all()
     res = env.step(np.tile([0.5, 0.0, 0.0], (100, 1)))

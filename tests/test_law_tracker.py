@@ -10,7 +10,7 @@ import pytest
 import torch
 
 from pathrl.baselines.law_tracker import LawTracker, LawTrackerCfg
-from pathrl.baselines.toppra import solve_plan
+from pathrl.baselines.toppra import ToppraSettings, solve_plan
 from pathrl.dataset.io import load_pathset
 from pathrl.envs.rewards import build_reward_terms
 from pathrl.envs.tracking import PathTrackingEnv
@@ -56,7 +56,8 @@ def test_the_tracker_follows_whole_paths_within_a_few_millimetres_and_every_limi
                                                  [r.start_s for r in recs], [r.end_s for r in recs]),
                              pi, ForwardKinematics(env.robot))
     assert np.mean([d["cart_pos_dev_mean_cm"] for d in devs]) < 0.5
-    topp = solve_plan(env.paths, full_segments(env.paths, ids), env.robot, progress=False, keep_trajectory=False)
+    topp = solve_plan(env.paths, full_segments(env.paths, ids), env.robot, ToppraSettings(keep_trajectory=False),
+                      progress=False)
     assert np.mean([r.duration_s for r in recs]) < 1.3 * np.mean([t.duration_s for t in topp])
 
 

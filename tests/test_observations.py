@@ -19,7 +19,7 @@ from pathrl.envs.observations import (
     tcp_observation,
     tracking_state,
 )
-from pathrl.envs.registry import EVAL_ENV, TASKS, make_env
+from pathrl.envs.registry import EVAL_ENV, TASKS, EnvRequest, make_env
 from pathrl.paths.pathset import build_pathset
 from pathrl.robot.model import load_robot
 from pathrl.schema import TrainAppCfg
@@ -48,9 +48,9 @@ def _build(variant: str, request):
         robot = load_robot(cfg["robot"])
         knots = smooth_paths(robot)
         paths = build_pathset(knots, [f"p{i}" for i in range(len(knots))])
-        return make_env(cfg, "test", num_envs=1, seed=0, paths=paths, robot=robot, **EVAL_ENV)
+        return make_env(cfg, EnvRequest("test", num_envs=1, seed=0, paths=paths, robot=robot), **EVAL_ENV)
     data = request.getfixturevalue(fixture)
-    return make_env(cfg, "test", num_envs=2, seed=0, dataset_path=str(getattr(data, "path", data)))
+    return make_env(cfg, EnvRequest("test", num_envs=2, seed=0, dataset_path=str(getattr(data, "path", data))))
 
 
 def _close(env) -> None:

@@ -16,12 +16,12 @@ from pathrl.cli.common import compose, to_container
 from pathrl.dataset.io import load_dataset
 from pathrl.envs.path_change_cfg import PathChangeCfg
 from pathrl.envs.path_changes import PathChanges, with_path_changes
-from pathrl.envs.registry import make_env
+from pathrl.envs.registry import EnvRequest, make_env
 from pathrl.eval.path_change import branch
 from pathrl.limits.check import limit_violations
 from pathrl.limits.feasible import JointLimits
 from pathrl.limits.integrate import interpolate_step
-from pathrl.paths.branch import branch_knots, dedupe_padded, tabulate_batch
+from pathrl.paths.branch import BranchShape, BranchStart, branch_knots, dedupe_padded, tabulate_batch
 from pathrl.paths.knots import KnotStrategy
 from pathrl.paths.pathset import build_pathset
 from pathrl.paths.spline import dedupe_knots
@@ -66,10 +66,12 @@ def test_batched_branch_equals_the_evaluations_branch(seed):
     q, v = torch.as_tensor(rng.normal(0, 1, (b, m))), torch.as_tensor(rng.normal(0, 1, (b, m)))
     v[0] = 0.0
     offset, ramp = torch.as_tensor(rng.normal(0, 0.4, (b, m))), torch.as_tensor(rng.uniform(0.2, 1.5, b))
-    got, count = branch_knots(ps.knots, ps.knot_s, ps.num_knots - 1, s_now, q, v, offset, ramp, torch.as_tensor(lim))
+    got, count = branch_knots(ps.knots, ps.knot_s, ps.num_knots - 1, BranchStart(s_now, q, v),
+                              BranchShape(offset, ramp, torch.as_tensor(lim)))
     for i in range(b):
         knots = ps.knots[i, : int(ps.num_knots[i])].numpy()
-        ref = branch(knots, float(s_now[i]), q[i].numpy(), v[i].numpy(), offset[i].numpy(), float(ramp[i]), lim)
+        start = BranchStart(float(s_now[i]), q[i].numpy(), v[i].numpy())
+        ref = branch(knots, start, BranchShape(offset[i].numpy(), float(ramp[i]), lim))
         n = int(count[i])
         assert ref.shape == (n, m)
         np.testing.assert_allclose(got[i, :n].numpy(), ref, rtol=0, atol=1e-12)
@@ -118,7 +120,7 @@ def test_off_is_the_env_itself_and_configs_compose(setup, cfg):
     assert {**group, "offsets": [0.3], "ramps": [1.0]} == cfg["path_change"]  # the experiment keeps gentle changes
     assert cfg["path_change"]["enabled"] and cfg["init_from"] == "models/iiwa7_random_continue"
     assert cfg["iterations"] == 200
-    env = make_env(plain, "train", num_envs=2, seed=0, paths=paths, robot=robot)
+    env = make_env(plain, EnvRequest(num_envs=2, seed=0, paths=paths, robot=robot))
     assert with_path_changes(plain, env) is env
     assert with_path_changes({**plain, "path_change": {"enabled": False}}, env) is env
     assert env.sample_paths is None
@@ -130,7 +132,7 @@ def test_off_is_the_env_itself_and_configs_compose(setup, cfg):
 
 def _wrapped(cfg, setup, n: int, seed: int, **pc) -> PathChanges:
     robot, paths = setup
-    env = make_env(cfg, "train", num_envs=n, seed=seed, paths=paths, robot=robot, max_deviation=None)
+    env = make_env(cfg, EnvRequest(num_envs=n, seed=seed, paths=paths, robot=robot), max_deviation=None)
     return PathChanges(env, PathChangeCfg(enabled=True, **pc))
 
 

@@ -11,7 +11,7 @@ import yaml
 
 from pathrl.cli.common import CONF_DIR, compose, to_container
 from pathrl.dataset.io import load_pathset
-from pathrl.envs.registry import EVAL_ENV, TASKS, check_task, get_task, make_env, task_cfg
+from pathrl.envs.registry import EVAL_ENV, TASKS, EnvRequest, check_task, get_task, make_env, task_cfg
 from pathrl.envs.terminations import TerminationReason
 from pathrl.paths.knots import KnotStrategy
 from pathrl.robot.model import load_robot
@@ -107,7 +107,7 @@ def test_every_task_creates_and_steps(name, request):
     overrides, fixture = TASK_RUNS[name]
     cfg = _cfg([*overrides, f"dataset.path={request.getfixturevalue(fixture)}"])
     assert check_task(cfg).name == name
-    env = make_env(cfg, "test", num_envs=2, seed=0)
+    env = make_env(cfg, EnvRequest("test", num_envs=2, seed=0))
     assert type(env).__name__ == ("TrueAdaptEnv" if TASKS[name].adapt else "PathTrackingEnv")
     _step(env)
 
@@ -120,7 +120,8 @@ def _experiment_env(cfg: dict, request):
     (datasets/<robot>/<name>), or a tiny generated trajectory set for the TrueAdapt experiments; skips when the
     dataset is not in the checkout."""
     if get_task(cfg).adapt:
-        return make_env(cfg, "test", num_envs=2, seed=0, dataset_path=request.getfixturevalue("tiny_trajectories"))
+        data = request.getfixturevalue("tiny_trajectories")
+        return make_env(cfg, EnvRequest("test", num_envs=2, seed=0, dataset_path=data))
     committed = ROOT / "datasets" / Path(cfg["dataset"]["path"]).relative_to("data")
     if not (committed / "dataset.json").is_file():
         pytest.skip(f"needs {cfg['dataset']['path']} (not in the checkout: generate it with pathrl-dataset)")
@@ -129,7 +130,8 @@ def _experiment_env(cfg: dict, request):
     if key not in _PATHS:
         _PATHS[key] = load_pathset(str(committed), "test", KnotStrategy.from_cfg(cfg["knots"]), robot=robot)
     pybullet = task_cfg(cfg)["backend"] == "pybullet" and get_task(cfg).feedback is not None
-    return make_env(cfg, "test", num_envs=1 if pybullet else 2, seed=0, paths=_PATHS[key], robot=robot, **EVAL_ENV)
+    req = EnvRequest("test", num_envs=1 if pybullet else 2, seed=0, paths=_PATHS[key], robot=robot)
+    return make_env(cfg, req, **EVAL_ENV)
 
 
 @pytest.mark.parametrize("name", EXPERIMENTS)

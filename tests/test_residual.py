@@ -10,7 +10,7 @@ from tensordict import TensorDict
 from test_train import run, train_cmd
 from torch import nn
 
-from pathrl.eval.evaluate import evaluate
+from pathrl.eval.evaluate import EvalOptions, evaluate
 from pathrl.policy.residual import (
     BASE_GROUP,
     ResidualEnv,
@@ -89,9 +89,9 @@ def test_an_untrained_residual_run_evaluates_exactly_as_its_controller(tiny_data
     as_controller = {**cfg, "residual": {}, "controller": cfg["residual"]["controller"]}
     (ctl / "config.yaml").write_text(yaml.safe_dump(as_controller))
     (ctl / "summary.json").write_text((res / "summary.json").read_text())
-    kw = dict(dataset_path=str(tiny_dataset), segments="full", backend="analytic", num_envs=8, progress=False,
-              record=False)
-    a, b = evaluate(res, **kw), evaluate(ctl, **kw)
+    opts = EvalOptions(dataset_path=str(tiny_dataset), segments="full", backend="analytic", num_envs=8,
+                       progress=False, record=False)
+    a, b = evaluate(res, opts), evaluate(ctl, opts)
     assert a["limit_violations"] == 0
     for key in ("duration_s", "task_failed_pct", "cart_pos_dev_mean_cm"):
         assert a[key] == b[key], key

@@ -1,9 +1,11 @@
-"""The package's shape, checked: sizes, layering and import cycles.
+"""The package's shape, checked: sizes, parameter counts, layering and import cycles.
 
 Read from the source with `ast`, nothing is imported: a module over 500 lines, a function over 80, a class over
-350, Hydra imported outside `pathrl/cli`, an import of a higher layer (:data:`LAYERS`) or a cycle of imports fails
-here with the offending names. Imports count wherever they are made, inside functions too (a function-level import
-is a dependency all the same, only a later one); an import under ``if TYPE_CHECKING:`` (annotations only) does not.
+350, a function taking more than 8 parameters (:data:`MAX_PARAMETERS`; the flat-tensor kernels of
+:data:`MANY_PARAMETERS` excepted), Hydra imported outside `pathrl/cli`, an import of a higher layer (:data:`LAYERS`)
+or a cycle of imports fails here with the offending names. Imports count wherever they are made, inside functions
+too (a function-level import is a dependency all the same, only a later one); an import under
+``if TYPE_CHECKING:`` (annotations only) does not.
 """
 
 from __future__ import annotations
@@ -13,6 +15,9 @@ from pathlib import Path
 
 PKG = Path(__file__).resolve().parents[1] / "pathrl"
 MAX_MODULE_LINES, MAX_FUNCTION_LINES, MAX_CLASS_LINES = 500, 80, 350
+#: Most parameters a function or method takes (self / cls not counted; ``*args`` and ``**kwargs`` one each): more
+#: go into a small frozen dataclass of related settings.
+MAX_PARAMETERS = 8
 
 
 def _modules() -> dict[str, Path]:
@@ -243,3 +248,63 @@ def test_no_package_cycle():
                                                        and f"{name} -> {t}" not in ALLOWED)
     graph = {k: {t for t in v if t in graph} for k, v in graph.items()}
     assert _cycles(graph) == []
+
+
+#: Functions that take more than :data:`MAX_PARAMETERS` parameters, "module.qualname": reason. Only flat-tensor
+#: kernels, which take many tensors for speed (no container built or unpacked per call). Only shrinks.
+MANY_PARAMETERS: dict[str, str] = {
+    "pathrl.envs.observations.observe_state": "observation kernel over the env's state tensors",
+    "pathrl.envs.tracking.advance": "one decision step over the env's state tensors",
+    "pathrl.native.advance": "C kernel wrapper: one decision step over flat tensors",
+    "pathrl.native.valid_range": "C kernel wrapper: the valid acceleration range from flat tensors",
+    "pathrl.limits._braking._illinois": "root finder over flat tensors (braking law)",
+}
+
+
+def _parameter_count(node: ast.FunctionDef | ast.AsyncFunctionDef) -> int:
+    """Named parameters (positional and keyword-only, without self / cls), +1 for ``*args``, +1 for ``**kwargs``."""
+    a = node.args
+    named = [p for p in (*a.posonlyargs, *a.args, *a.kwonlyargs) if p.arg not in ("self", "cls")]
+    return len(named) + (a.vararg is not None) + (a.kwarg is not None)
+
+
+def _qualified_functions(tree: ast.Module) -> list[tuple[str, ast.FunctionDef | ast.AsyncFunctionDef]]:
+    """(qualified name, node) of every function and method of a module, nested ones too (``Class.method``,
+    ``outer.inner``)."""
+    out = []
+
+    def visit(node: ast.AST, prefix: str) -> None:
+        for child in ast.iter_child_nodes(node):
+            if isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
+                name = f"{prefix}{child.name}"
+                if not isinstance(child, ast.ClassDef):
+                    out.append((name, child))
+                visit(child, name + ".")
+            else:
+                visit(child, prefix)
+
+    visit(tree, "")
+    return out
+
+
+def _many_parameters() -> dict[str, int]:
+    """"module.qualname" -> parameter count, of every function over :data:`MAX_PARAMETERS`."""
+    return {f"{n}.{q}": _parameter_count(f) for n, tree in TREES.items() for q, f in _qualified_functions(tree)
+            if _parameter_count(f) > MAX_PARAMETERS}
+
+
+def test_parameter_count_counts_named_and_star_parameters_without_self():
+    f = ast.parse("class C:\n    def m(self, a, /, b, *args, c, **kw):\n        def g(x): pass\n").body[0]
+    counted = [(q, _parameter_count(d)) for q, d in _qualified_functions(ast.Module([f], []))]
+    assert counted == [("C.m", 5), ("C.m.g", 1)]
+
+
+def test_functions_take_few_parameters():
+    """No function or method takes more than MAX_PARAMETERS parameters, except the allow-listed kernels."""
+    over = {k: v for k, v in _many_parameters().items() if k not in MANY_PARAMETERS}
+    assert over == {}, f"functions over {MAX_PARAMETERS} parameters (group them in a frozen dataclass): {over}"
+
+
+def test_many_parameters_allow_list_is_current():
+    """Every allow-listed kernel still exists and still takes more than MAX_PARAMETERS parameters."""
+    assert sorted(set(MANY_PARAMETERS) - set(_many_parameters())) == []

@@ -53,11 +53,11 @@ def test_terms():
 
 def test_env_sets_one_reason_per_env_and_logs_their_shares(tiny_dataset):
     from pathrl.cli.common import compose, to_container
-    from pathrl.envs.registry import make_env
+    from pathrl.envs.registry import EnvRequest, make_env
     from pathrl.schema import TrainAppCfg
 
     cfg = to_container(compose("train", [f"dataset.path={tiny_dataset}", "env.max_deviation=1e-6"], TrainAppCfg))
-    env = make_env(cfg, "train", num_envs=8, seed=3)
+    env = make_env(cfg, EnvRequest(num_envs=8, seed=3))
     _, _, dones, extras = env.step(torch.ones(8, env.num_actions))  # full acceleration leaves the path at once
     assert bool(dones.all()) and env.termination.tolist() == [R.DEVIATION] * 8
     log = extras["log"]

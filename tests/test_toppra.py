@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from pathrl.baselines.toppra import MARGIN, solve_plan, solve_segment
+from pathrl.baselines.toppra import MARGIN, PathLimits, ToppraSettings, solve_plan, solve_segment
 from pathrl.paths.pathset import build_pathset
 from pathrl.paths.segments import evaluation_plan
 from pathrl.paths.spline import arc_length_table, fit_spline, knot_arc_lengths
@@ -16,6 +16,7 @@ from pathrl.robot.external import load_robot_by_name
 
 VEL = np.array([1.0, 2.0, 1.5])
 ACC = np.array([4.0, 3.0, 10.0])
+LIMITS = PathLimits(VEL, ACC)
 
 
 def line_time(length: float, v: float, a: float) -> float:
@@ -38,14 +39,14 @@ def test_straight_line_matches_analytic_minimum_time(scale):
     d = np.abs(b - a) / length
     v, acc = float(np.min(VEL / d)), float(np.min(ACC / d))  # the binding joint's limits along the line
     expect = line_time(length, v, acc)
-    res = solve_segment(knots, 0.0, length, VEL, ACC, None)
+    res = solve_segment(knots, 0.0, length, LIMITS)
     assert res.status == "ok"
     assert res.duration_s == pytest.approx(expect, rel=1e-2)
     assert res.duration_s >= expect * (1 - 1e-6)  # never faster than the optimum
     # only the small safety margin is lost
     assert res.duration_s <= expect * (1 + 2 * MARGIN)
     # a sub-segment of the line
-    res2 = solve_segment(knots, 0.25 * length, 0.75 * length, VEL, ACC, None)
+    res2 = solve_segment(knots, 0.25 * length, 0.75 * length, LIMITS)
     assert res2.duration_s == pytest.approx(line_time(0.5 * length, v, acc), rel=1e-2)
     np.testing.assert_allclose(res2.q[0], a + 0.25 * (b - a), atol=1e-6)
     np.testing.assert_allclose(res2.q[-1], a + 0.75 * (b - a), atol=1e-6)
@@ -60,9 +61,8 @@ def test_curved_path_respects_limits():
     knots = curved_knots()
     _, length = knot_arc_lengths(knots)
     pos = np.array([[-2.0, 2.0]] * 3)
-    res = solve_segment(
-        knots, 0.1 * length, 0.9 * length, VEL, ACC, pos, control_rate=240.0, jerk_limits=20 * ACC
-    )
+    limits = PathLimits(VEL, ACC, pos, jerk=20 * ACC)
+    res = solve_segment(knots, 0.1 * length, 0.9 * length, limits, ToppraSettings(control_rate=240.0))
     assert res.status == "ok", res.summary()
     assert res.violations == {"position": 0, "velocity": 0, "acceleration": 0}
     assert res.max_vel_ratio <= 1.0 + 1e-9 and res.max_acc_ratio <= 1.0 + 1e-9
@@ -94,7 +94,7 @@ def test_duration_close_to_default_toppra():
 
     knots = curved_knots()
     _, length = knot_arc_lengths(knots)
-    res = solve_segment(knots, 0.0, length, VEL, ACC, None)
+    res = solve_segment(knots, 0.0, length, LIMITS)
     spline = fit_spline(knots)
     from pathrl.baselines.toppra import SegmentPath, as_toppra_path
 
@@ -108,7 +108,7 @@ def test_duration_close_to_default_toppra():
 
 
 def test_empty_segment():
-    res = solve_segment(curved_knots(), 1.0, 1.0, VEL, ACC, None)
+    res = solve_segment(curved_knots(), 1.0, 1.0, LIMITS)
     assert res.status == "empty" and res.duration_s == 0.0
 
 
@@ -139,17 +139,17 @@ def test_solve_plan_deterministic(iiwa, protocol, episodes):
     i = episodes - 1
     p = int(plan.path[i])
     k = paths.knots[p, : int(paths.num_knots[p])].numpy()
-    one = solve_segment(
-        k, float(plan.start_s[i]), float(plan.end_s[i]), iiwa.vel_limits, iiwa.acc_limits, iiwa.pos_limits
-    )
+    limits = PathLimits(iiwa.vel_limits, iiwa.acc_limits, iiwa.pos_limits)
+    one = solve_segment(k, float(plan.start_s[i]), float(plan.end_s[i]), limits)
     assert one.duration_s == a[i].duration_s
 
 
 def test_solve_plan_two_workers_same_order(iiwa):
     paths = synthetic_paths()
     plan = evaluation_plan(paths, 6, "paper", seed=0)
-    a = solve_plan(paths, plan, iiwa, workers=1, progress=False, keep_trajectory=False)
-    b = solve_plan(paths, plan, iiwa, workers=2, progress=False, keep_trajectory=False, chunk_size=1)
+    drop = ToppraSettings(keep_trajectory=False)
+    a = solve_plan(paths, plan, iiwa, drop, workers=1, progress=False)
+    b = solve_plan(paths, plan, iiwa, drop, workers=2, progress=False, chunk_size=1)
     assert [r.duration_s for r in a] == [r.duration_s for r in b]
     assert a[0].q.shape == (0, 7)
 
@@ -241,10 +241,9 @@ def test_ruckig_tracked_straight_line_against_its_analytic_time():
     from pathrl.baselines.ruckig_track import ruckig_tracked
 
     v, a, j, d = 1.0, 2.0, 20.0, 3.0
-    lim = {"vel": np.array([v, v]), "acc": np.array([a, a]), "jerk": np.array([j, j]),
-           "pos": np.array([[-10.0, 10.0], [-10.0, 10.0]])}
+    lim = PathLimits(np.array([v, v]), np.array([a, a]), np.array([[-10.0, 10.0], [-10.0, 10.0]]), np.array([j, j]))
     knots = np.array([[0.0, 0.0], [d, 0.0]])
-    res = solve_segment(knots, 0.0, d, lim["vel"], lim["acc"], lim["pos"], 240.0, jerk_limits=lim["jerk"])
+    res = solve_segment(knots, 0.0, d, lim, ToppraSettings(control_rate=240.0))
     assert res.duration_s == pytest.approx(d / v + v / a, abs=0.01)
     tr = ruckig_tracked(res, lim, 240.0)
     assert d / v + v / a + a / j - 1e-9 <= tr["duration_s"] <= d / v + v / a + a / j + 0.1

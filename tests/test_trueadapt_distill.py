@@ -102,13 +102,13 @@ ABLATIONS = {"full": (), "no_position": ("pos",), "no_velocity": ("vel",), "no_a
 
 @pytest.mark.parametrize("variant", sorted(ABLATIONS))
 def test_ablation_experiments_shape_the_students_state_and_keep_the_teacher(variant, tiny_trueadapt):
-    from pathrl.envs.registry import make_env
+    from pathrl.envs.registry import EnvRequest, make_env
     from pathrl.train.runner import check_run_cfg
 
     cfg = _cfg(f"iiwa7_trueadapt_on_plate_distill_{variant}", tiny_trueadapt.path, Path("unused"), 1000)
     check_run_cfg(cfg)
     assert cfg["teacher"] == {"name": "trueadapt_tray"} and cfg["lr_decay"] == {"final": 1e-5, "start": 0.3}
-    parts = [name for name, _, _ in make_env(cfg, "train", num_envs=2).observation_layout()]
+    parts = [name for name, _, _ in make_env(cfg, EnvRequest(num_envs=2)).observation_layout()]
     full = ["pos", "vel", "acc", "prev_ball", "ball", "reference_1"]
     if variant == "f10":
         assert parts == full + [f"reference_{k}" for k in range(2, 11)]

@@ -13,7 +13,7 @@ from pathrl.cli.industrial import main as industrial_main
 from pathrl.cli.view import main as view_main
 from pathrl.industrial.controller import ControllerParams, execute
 from pathrl.industrial.experiments import select_targets
-from pathrl.industrial.iwa_env import IWAEpisode
+from pathrl.industrial.iwa_env import IWAEpisode, IWASettings
 from pathrl.industrial.mpgd import MPGDParams, run_mpgd
 from pathrl.industrial.record import mpgd_iterations, policy_iterations
 from pathrl.industrial.rl import run_policy_iwa
@@ -71,8 +71,8 @@ def test_mpgd_iterations_are_run_mpgds(target):
 def test_policy_iterations_keep_what_the_policy_saw(target):
     """The learned IWA's kept executions reproduce run_policy_iwa's history (the copy is the same execution)."""
     ctrl = ControllerParams()
-    ref = run_policy_iwa(IWAEpisode(target, target.speed, ctrl, 100, 10.0, 2), feedback(0.5))
-    res, kept = policy_iterations(target, target.speed, ctrl, feedback(0.5), k_max=2)
+    ref = run_policy_iwa(IWAEpisode(target, target.speed, ctrl, IWASettings(100, 10.0, 2)), feedback(0.5))
+    res, kept = policy_iterations(target, target.speed, ctrl, feedback(0.5), IWASettings(k_max=2))
     assert res.history == ref.history == [k.errors.max_pos_mm for k in kept]
     assert len(kept) == 3 and kept[-1].errors.max_pos_mm < kept[0].errors.max_pos_mm
     ex = execute(baseline_program(target), target.speed, ctrl)

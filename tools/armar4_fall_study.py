@@ -23,7 +23,7 @@ import torch
 from pathrl.baselines.balance import BalanceCfg, lean_vector
 from pathrl.baselines.com import StaticCom
 from pathrl.dataset.io import load_pathset
-from pathrl.envs.registry import EVAL_ENV, make_env
+from pathrl.envs.registry import EVAL_ENV, EnvRequest, make_env
 from pathrl.envs.tracking import PathTrackingEnv
 from pathrl.eval.evaluate import PYBULLET_ENVS
 from pathrl.eval.rollout import rollout
@@ -103,8 +103,8 @@ def study(run_dir: str, dataset: str, episodes: int, out: str, controller: dict 
     episodes = len(ids)
     n = min(PYBULLET_ENVS, episodes)
     gap = summary.get("knot_gap_norm") if controller else policy_scale(Path(run_dir), summary)  # RunError without it
-    env = make_env(cfg, "test", num_envs=n, seed=0, knot_gap_norm=gap, paths=paths, robot=robot,
-                   backend="pybullet", **EVAL_ENV)
+    request = EnvRequest("test", num_envs=n, seed=0, knot_gap_norm=gap, paths=paths, robot=robot, backend="pybullet")
+    env = make_env(cfg, request, **EVAL_ENV)
     try:
         policy = make_controller(controller, env) if controller else load_policy(cfg, env, ckpt)
         fk = ForwardKinematics(robot)

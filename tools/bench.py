@@ -114,7 +114,7 @@ def bench_env(robot_name: str, num_envs: int, seconds: float, mode: str = "nativ
 
 
 def bench_reference(robot_name: str, seconds: float) -> dict:
-    from pathrl.envs.reference import ReferencePath, ReferenceTrackingEnv
+    from pathrl.envs.reference import ReferencePath, ReferenceSettings, ReferenceTrackingEnv
     from pathrl.limits.braking import braking_acceleration
     from pathrl.limits.feasible import JointLimits
 
@@ -128,8 +128,8 @@ def bench_reference(robot_name: str, seconds: float) -> dict:
         return braking_acceleration(*t, lim, 0.1)[0].numpy()
 
     def make():
-        return ReferenceTrackingEnv(robot, path, 0.0, len(path.knots) - 1, build_reward_terms(REWARD),
-                                    knot_gap=float(np.diff(path.knot_s).max()), braking=brake)
+        settings = ReferenceSettings(float(np.diff(path.knot_s).max()))
+        return ReferenceTrackingEnv(robot, path, 0.0, len(path.knots) - 1, build_reward_terms(REWARD), settings, brake)
 
     env = make()
     rng = np.random.default_rng(0)

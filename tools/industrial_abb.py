@@ -110,7 +110,7 @@ def table2(run_dir: str) -> str:
     from pathrl.industrial.controller import ControllerParams
     from pathrl.industrial.experiments import select_targets
     from pathrl.industrial.ilc import ILCParams, run_ilc
-    from pathrl.industrial.iwa_env import IWAEpisode
+    from pathrl.industrial.iwa_env import IWAEpisode, IWASettings
     from pathrl.industrial.mpgd import run_mpgd
     from pathrl.industrial.rl import run_policy_iwa
     from pathrl.industrial.rl_train import load_agent
@@ -134,7 +134,7 @@ def table2(run_dir: str) -> str:
         res = {"MPGD": run_mpgd(t, prog, t.speed, None, ctrl),
                "ILC P": run_ilc(t, prog, t.speed, ILCParams("p", 1.0), ctrl),
                "ILC filtered": run_ilc(t, prog, t.speed, ILCParams("filtered", 1.0), ctrl)}
-        env = IWAEpisode(t, t.speed, ctrl, 100, 10.0, 10, 2.0)
+        env = IWAEpisode(t, t.speed, ctrl, IWASettings(100, 10.0, 10, 2.0))
         res["RL"] = run_policy_iwa(env, policy)
         first_actions.append(policy(IWAEpisode(t, t.speed, ctrl).reset()))
         cells = []

@@ -28,12 +28,12 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from pathrl.baselines.toppra_path import limit_counts
+from pathrl.baselines.toppra_path import PathLimits, limit_counts
 
 if TYPE_CHECKING:
     from pathrl.baselines.toppra import ToppraResult
 
-__all__ = ["Tracked", "ruckig_tracked", "stopping_speeds", "track_plan"]
+__all__ = ["TrackSettings", "Tracked", "ruckig_tracked", "stopping_speeds", "track_plan"]
 
 
 @dataclass(frozen=True)
@@ -61,14 +61,26 @@ def stopping_speeds(q: np.ndarray, pos: np.ndarray, acc: np.ndarray, jerk: np.nd
     return -speed(q - pos[:, 0]), speed(pos[:, 1] - q)
 
 
-def track_plan(q: np.ndarray, qd: np.ndarray, vel: np.ndarray, acc: np.ndarray, jerk: np.ndarray,
-               pos: np.ndarray | None, control_rate: float, gain: float = 2.0, lead_s: float = 0.05,
-               max_extra_s: float = 10.0,
-               window: int = 240) -> Tracked:
+@dataclass(frozen=True)
+class TrackSettings:
+    """How :func:`track_plan` follows a plan (module docstring): the pull to the plan's position `gain` (1/s), the
+    plan's velocity taken `lead_s` ahead (s), at most `max_extra_s` (s) after the plan's end to reach it, and
+    `window` plan samples searched ahead of the last match for the nearest one."""
+
+    gain: float = 2.0
+    lead_s: float = 0.05
+    max_extra_s: float = 10.0
+    window: int = 240
+
+
+def track_plan(q: np.ndarray, qd: np.ndarray, limits: PathLimits, control_rate: float,
+               settings: TrackSettings = TrackSettings()) -> Tracked:
     """Track the plan sampled at `control_rate` (q, qd: (T, M), the first sample at rest) with Ruckig under the
-    limits (M,) and position limits `pos` (M, 2) (module docstring; `gain` in 1/s). `window`: plan samples searched
-    ahead of the last match for the nearest one."""
+    velocity, acceleration and jerk `limits` (M,) and the position limits (M, 2; None: none) (module docstring)."""
     from ruckig import ControlInterface, InputParameter, OutputParameter, Result, Ruckig
+
+    vel, acc, jerk, pos = limits.vel, limits.acc, limits.jerk, limits.pos
+    gain, window = settings.gain, settings.window
 
     m = q.shape[1]
     otg, inp, out = Ruckig(m, 1.0 / control_rate), InputParameter(m), OutputParameter(m)
@@ -81,8 +93,8 @@ def track_plan(q: np.ndarray, qd: np.ndarray, vel: np.ndarray, acc: np.ndarray, 
     cur = q[0].copy()
     rows = [(q[0], np.zeros(m), np.zeros(m))]
     last = len(q) - 1
-    lead = int(round(lead_s * control_rate))
-    for k in range(1, last + 1 + int(max_extra_s * control_rate)):
+    lead = int(round(settings.lead_s * control_rate))
+    for k in range(1, last + 1 + int(settings.max_extra_s * control_rate)):
         if k == last + 1:  # the plan has ended: to its end, at rest
             inp.control_interface = ControlInterface.Position
             inp.target_position, inp.target_velocity = q[last].tolist(), [0.0] * m
@@ -107,11 +119,10 @@ def track_plan(q: np.ndarray, qd: np.ndarray, vel: np.ndarray, acc: np.ndarray, 
     return Tracked((len(p) - 1) / control_rate, float(dev.max()), float(dev.mean()), p, v, a)
 
 
-def ruckig_tracked(res: ToppraResult, limits: dict[str, np.ndarray | None], control_rate: float) -> dict[str, Any]:
+def ruckig_tracked(res: ToppraResult, limits: PathLimits, control_rate: float) -> dict[str, Any]:
     """Duration, path deviation and limit violations (jerk included) of `res`'s plan tracked by Ruckig
     (:func:`track_plan`)."""
-    tr = track_plan(res.q, res.qd, limits["vel"], limits["acc"], limits["jerk"], limits["pos"], control_rate)
-    viol = limit_counts(tr.q, tr.qd, tr.qdd, limits["pos"], limits["vel"], limits["acc"], limits["jerk"],
-                        control_rate)
+    tr = track_plan(res.q, res.qd, limits, control_rate)
+    viol = limit_counts(tr.q, tr.qd, tr.qdd, limits, control_rate)
     return {"duration_s": tr.duration_s, "max_dev_rad": tr.max_dev_rad, "mean_dev_rad": tr.mean_dev_rad,
             "violations": viol}

@@ -39,7 +39,7 @@ import os
 import time
 from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from enum import StrEnum
 from typing import TYPE_CHECKING, Any
 
@@ -47,6 +47,7 @@ import numpy as np
 
 from pathrl.baselines.toppra_path import (
     CHECK_RTOL,
+    PathLimits,
     SegmentPath,
     as_toppra_path,
     const_accel_eval,
@@ -64,7 +65,8 @@ if TYPE_CHECKING:
     from pathrl.robot.model import RobotSpec
 
 __all__ = ["GRID_STEP", "MARGIN", "MAX_ITERATIONS", "REFINE_ITERATIONS", "RESCALE_MARGIN", "VIOLATION_KEYS",
-           "ToppraResult", "ToppraStatus", "path_limits", "solve_plan", "solve_segment"]
+           "PathLimits", "ToppraResult", "ToppraSettings", "ToppraStatus", "path_limits", "solve_plan",
+           "solve_segment"]
 
 
 #: Default spacing (rad of arc length) of the uniform part of the gridpoints.
@@ -77,6 +79,22 @@ REFINE_ITERATIONS = 6
 #: Extra margin applied when scaling limits down after an overshoot.
 RESCALE_MARGIN = 1e-3
 MAX_ITERATIONS = 12
+
+
+@dataclass(frozen=True)
+class ToppraSettings:
+    """How :func:`solve_segment` solves (module doc): samples and checks at `control_rate` (Hz); gridpoints at the
+    spline knots and every `grid_step` rad of arc length; at most `max_iterations` solves, the limits scaled by
+    1 - `margin` (after `refine_iterations` solves also by the observed overshoot). `keep_trajectory` False drops
+    the samples (q, qd, qdd become (0, M)) to save memory."""
+
+    control_rate: float = 240.0
+    grid_step: float = GRID_STEP
+    max_iterations: int = MAX_ITERATIONS
+    refine_iterations: int = REFINE_ITERATIONS
+    margin: float = MARGIN
+    keep_trajectory: bool = True
+
 
 VIOLATION_KEYS = ("position", "velocity", "acceleration")
 
@@ -189,24 +207,18 @@ class _Refined:
     duration: float = math.nan
 
 
-def _solve_refined(
-    seg: SegmentPath,
-    grid: np.ndarray,
-    vel: np.ndarray,
-    acc: np.ndarray,
-    start_rate: float,
-    control_rate: float,
-    max_iterations: int,
-    refine_iterations: int,
-    margin: float,
-) -> _Refined:
-    """Solve with toppra and re-solve while a control-rate sample exceeds a limit (steps 2-3 of the module doc)."""
+def _solve_refined(seg: SegmentPath, grid: np.ndarray, limits: PathLimits, start_rate: float,
+                   settings: ToppraSettings) -> _Refined:
+    """Solve with toppra from path velocity `start_rate` (rad of arc length / s) on gridpoints `grid` and re-solve
+    while a control-rate sample exceeds a velocity / acceleration limit (steps 2-3 of the module doc)."""
     import toppra.algorithm as algo
     import toppra.constraint as constraint
     from toppra.algorithm.algorithm import ParameterizationReturnCode
 
     path = as_toppra_path(seg)
-    vel_scale = acc_scale = 1.0 - margin
+    vel, acc, control_rate = limits.vel, limits.acc, settings.control_rate
+    max_iterations = settings.max_iterations
+    vel_scale = acc_scale = 1.0 - settings.margin
     tol = 1.0 + CHECK_RTOL
     for it in range(1, max_iterations + 1):
         cons = [
@@ -235,7 +247,7 @@ def _solve_refined(
             break
         # constrain the trajectory where it overshot: the violating samples become gridpoints
         grid = merge_gridpoints(grid, r[over_v | over_a])
-        if it > refine_iterations:  # last resort: also scale the limits down by the observed overshoot
+        if it > settings.refine_iterations:  # last resort: also scale the limits down by the observed overshoot
             vr, ar = float(np.max(np.abs(qd) / vel)), float(np.max(np.abs(qdd) / acc))
             if vr > 1.0:
                 vel_scale *= (1.0 - RESCALE_MARGIN) / vr
@@ -244,20 +256,13 @@ def _solve_refined(
     return _Refined(True, vel_scale, acc_scale, grid, it, t, r, qd, qdd, duration)
 
 
-def _sample_checks(
-    seg: SegmentPath,
-    sol: _Refined,
-    q: np.ndarray,
-    pos: np.ndarray | None,
-    vel: np.ndarray,
-    acc: np.ndarray,
-    jerk: np.ndarray | None,
-    control_rate: float,
-) -> dict[str, Any]:
+def _sample_checks(seg: SegmentPath, sol: _Refined, q: np.ndarray, limits: PathLimits,
+                   control_rate: float) -> dict[str, Any]:
     """Path deviation, limit violations and limit ratios of the control-rate samples q (T, M) of `sol`."""
     t, r, qd, qdd = sol.t, sol.r, sol.qd, sol.qdd
+    vel, acc, jerk = limits.vel, limits.acc, limits.jerk
     dev = float(np.linalg.norm(q - seg(r), axis=1).max())
-    viol = limit_counts(q, qd, qdd, pos, vel, acc, jerk, control_rate)
+    viol = limit_counts(q, qd, qdd, limits, control_rate)
     jerk_abs = np.abs(np.diff(qdd, axis=0)) * control_rate if len(t) > 1 else np.zeros((1, q.shape[1]))
     return {
         "max_joint_dev_rad": dev,
@@ -270,27 +275,12 @@ def _sample_checks(
     }
 
 
-def solve_segment(
-    knots: np.ndarray,
-    start_s: float,
-    end_s: float,
-    vel_limits: np.ndarray,
-    acc_limits: np.ndarray,
-    pos_limits: np.ndarray | None = None,
-    control_rate: float = 240.0,
-    jerk_limits: np.ndarray | None = None,
-    grid_step: float = GRID_STEP,
-    max_iterations: int = MAX_ITERATIONS,
-    refine_iterations: int = REFINE_ITERATIONS,
-    margin: float = MARGIN,
-    keep_trajectory: bool = True,
-    start_rate: float = 0.0,
-) -> ToppraResult:
-    """Time-optimal trajectory along the path segment [start_s, end_s] to rest (see module doc).
+def solve_segment(knots: np.ndarray, start_s: float, end_s: float, limits: PathLimits,
+                  settings: ToppraSettings = ToppraSettings(), start_rate: float = 0.0) -> ToppraResult:
+    """Time-optimal trajectory along the path segment [start_s, end_s] (arc length, rad) to rest (see module doc).
 
-    knots: (K, M) path knots (path joints only); limits: (M,) magnitudes, pos_limits (M, 2).
-    keep_trajectory=False drops the samples (q, qd, qdd become (0, M)) to save memory.
-    start_rate: path velocity at the start (rad of arc length per s; 0: from rest). toppra reports the
+    knots: (K, M) path knots (path joints only); `limits` of those M joints; `settings`: how it is solved and
+    sampled. start_rate: path velocity at the start (rad of arc length per s; 0: from rest). toppra reports the
     segment infeasible if the limits cannot be kept from that velocity.
     """
     toppra_module()
@@ -298,10 +288,8 @@ def solve_segment(
     t_begin = time.perf_counter()
     knots = dedupe_knots(knots)
     m = knots.shape[1]
-    vel = np.asarray(vel_limits, dtype=np.float64).reshape(m)
-    acc = np.asarray(acc_limits, dtype=np.float64).reshape(m)
-    pos = None if pos_limits is None else np.asarray(pos_limits, dtype=np.float64).reshape(m, 2)
-    jerk = None if jerk_limits is None else np.asarray(jerk_limits, dtype=np.float64).reshape(m)
+    limits = limits.as_float64(m)
+    keep_trajectory = settings.keep_trajectory
     spline = fit_spline(knots)
     u_table, s_table = arc_length_table(spline, knots)
     length = float(s_table[-1])
@@ -324,8 +312,8 @@ def solve_segment(
         return result(ToppraStatus.EMPTY, duration_s=0.0, max_joint_dev_rad=0.0)
     u0, u1 = np.interp([start_s, end_s], s_table, u_table)
     seg = SegmentPath(spline, u0, u1)
-    grid = segment_gridpoints(u_table, s_table, chord_params(knots), start_s, end_s, u0, u1, grid_step)
-    sol = _solve_refined(seg, grid, vel, acc, start_rate, control_rate, max_iterations, refine_iterations, margin)
+    grid = segment_gridpoints(u_table, s_table, chord_params(knots), start_s, end_s, u0, u1, settings.grid_step)
+    sol = _solve_refined(seg, grid, limits, start_rate, settings)
     vel_scale, acc_scale, grid, it = sol.vel_scale, sol.acc_scale, sol.grid, sol.iterations
     if not sol.feasible:
         return result(ToppraStatus.INFEASIBLE, vel_scale=vel_scale, acc_scale=acc_scale, num_gridpoints=len(grid),
@@ -339,7 +327,7 @@ def solve_segment(
         qdd=sol.qdd if keep_trajectory else empty,
         vel_scale=vel_scale,
         acc_scale=acc_scale,
-        **_sample_checks(seg, sol, q, pos, vel, acc, jerk, control_rate),
+        **_sample_checks(seg, sol, q, limits, settings.control_rate),
         num_gridpoints=len(grid),
         iterations=it,
     )
@@ -360,32 +348,19 @@ class _Task:
     end_s: float
 
 
-def _solve_chunk(
-    tasks: Sequence[_Task],
-    limits: dict[str, np.ndarray | None],
-    control_rate: float,
-    keep: bool,
-    grid_step: float,
-    track: bool = False,
-) -> list[tuple[int, ToppraResult]]:
+def _solve_chunk(tasks: Sequence[_Task], limits: PathLimits, settings: ToppraSettings,
+                 track: bool = False) -> list[tuple[int, ToppraResult]]:
+    """(index, result) of each task; `track`: also track each plan with Ruckig (the samples are kept for it and
+    dropped after unless ``settings.keep_trajectory``)."""
+    keep = settings.keep_trajectory
+    solving = replace(settings, keep_trajectory=keep or track)
     out = []
     for task in tasks:
-        res = solve_segment(
-            task.knots,
-            task.start_s,
-            task.end_s,
-            limits["vel"],
-            limits["acc"],
-            limits["pos"],
-            control_rate,
-            jerk_limits=limits["jerk"],
-            grid_step=grid_step,
-            keep_trajectory=keep or track,
-        )
+        res = solve_segment(task.knots, task.start_s, task.end_s, limits, solving)
         if track and res.status.solved and len(res.q):
             from pathrl.baselines.ruckig_track import ruckig_tracked
 
-            res.tracked = ruckig_tracked(res, limits, control_rate)
+            res.tracked = ruckig_tracked(res, limits, settings.control_rate)
         if track and not keep:
             res.q = res.qd = res.qdd = np.zeros((0, res.q.shape[1]))
         out.append((task.index, res))
@@ -402,31 +377,18 @@ def _worker_init() -> None:
         pass
 
 
-def path_limits(robot: RobotSpec) -> dict[str, np.ndarray]:
-    """Limits of the path joints: vel, acc, jerk (M,), pos (M, 2)."""
+def path_limits(robot: RobotSpec) -> PathLimits:
+    """Limits of the robot's path joints: vel, acc, jerk (M,), pos (M, 2)."""
     idx = np.asarray(robot.path_index)
-    return {
-        "vel": np.asarray(robot.vel_limits)[idx],
-        "acc": np.asarray(robot.acc_limits)[idx],
-        "jerk": np.asarray(robot.jerk_limits)[idx],
-        "pos": np.asarray(robot.pos_limits)[idx],
-    }
+    return PathLimits(vel=np.asarray(robot.vel_limits)[idx], acc=np.asarray(robot.acc_limits)[idx],
+                      pos=np.asarray(robot.pos_limits)[idx], jerk=np.asarray(robot.jerk_limits)[idx])
 
 
-def solve_plan(
-    paths: PathSet,
-    plan: Segments,
-    robot: RobotSpec,
-    workers: int = 1,
-    progress: bool = True,
-    control_rate: float = 240.0,
-    keep_trajectory: bool = True,
-    grid_step: float = GRID_STEP,
-    chunk_size: int = 4,
-    track: bool = False,
-) -> list[ToppraResult]:
-    """Solve every episode of `plan` (in plan order, independent of `workers`); `track`: also track each plan
-    with Ruckig (``ToppraResult.tracked``)."""
+def solve_plan(paths: PathSet, plan: Segments, robot: RobotSpec, settings: ToppraSettings = ToppraSettings(), *,
+               workers: int = 1, progress: bool = True, chunk_size: int = 4, track: bool = False) -> list[ToppraResult]:
+    """Solve every episode of `plan` under the robot's path-joint limits as `settings` says (in plan order,
+    independent of `workers` processes and of `chunk_size` episodes per task); `track`: also track each plan with
+    Ruckig (``ToppraResult.tracked``)."""
     if paths.dof != robot.path_dof:
         raise ValueError(
             f"paths have {paths.dof} joints, robot {robot.name!r} has {robot.path_dof} path joints"
@@ -457,7 +419,7 @@ def solve_plan(
         job = bar.add_task("solve", total=len(tasks))
         if workers <= 1 or len(chunks) <= 1:
             for chunk in chunks:
-                for i, res in _solve_chunk(chunk, limits, control_rate, keep_trajectory, grid_step, track):
+                for i, res in _solve_chunk(chunk, limits, settings, track):
                     results[i] = res
                 bar.advance(job, len(chunk))
         else:
@@ -465,10 +427,7 @@ def solve_plan(
 
             ctx = mp.get_context("spawn")
             with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_worker_init) as pool:
-                futures = [
-                    pool.submit(_solve_chunk, chunk, limits, control_rate, keep_trajectory, grid_step, track)
-                    for chunk in chunks
-                ]
+                futures = [pool.submit(_solve_chunk, chunk, limits, settings, track) for chunk in chunks]
                 from concurrent.futures import as_completed
 
                 for fut in as_completed(futures):

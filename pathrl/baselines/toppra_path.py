@@ -4,18 +4,41 @@ path, its gridpoints, the constant-path-acceleration evaluation of a solution an
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 from scipy.interpolate import BSpline
 
-__all__ = ["CHECK_RTOL", "MIN_GRIDPOINTS", "SegmentPath", "as_toppra_path", "const_accel_eval", "limit_counts",
-           "merge_gridpoints", "sample_times", "segment_gridpoints", "toppra_module"]
+__all__ = ["CHECK_RTOL", "MIN_GRIDPOINTS", "PathLimits", "SegmentPath", "as_toppra_path", "const_accel_eval",
+           "limit_counts", "merge_gridpoints", "sample_times", "segment_gridpoints", "toppra_module"]
 
 
 #: Minimum number of gridpoints of a segment (short segments).
 MIN_GRIDPOINTS = 100
 #: Relative tolerance of the control-rate limit check (float noise only).
 CHECK_RTOL = 1e-9
+
+
+@dataclass(frozen=True)
+class PathLimits:
+    """Limits of the M path joints: velocity and acceleration magnitudes (M,) (rad/s, rad/s^2), position limits
+    (M, 2) (rad) and jerk magnitudes (M,) (rad/s^3); None: unbounded. TOPP-RA keeps velocity and acceleration;
+    position and jerk are checked on the samples (and bound Ruckig's tracking)."""
+
+    vel: np.ndarray
+    acc: np.ndarray
+    pos: np.ndarray | None = None
+    jerk: np.ndarray | None = None
+
+    def as_float64(self, m: int) -> PathLimits:
+        """The limits as float64 arrays of `m` joints: (m,), pos (m, 2)."""
+        return PathLimits(_float64(self.vel, (m,)), _float64(self.acc, (m,)), _float64(self.pos, (m, 2)),
+                          _float64(self.jerk, (m,)))
+
+
+def _float64(a: np.ndarray | None, shape: tuple[int, ...]) -> np.ndarray | None:
+    """`a` as a float64 array of `shape` (None stays None)."""
+    return None if a is None else np.asarray(a, dtype=np.float64).reshape(shape)
 
 
 def toppra_module():
@@ -132,28 +155,20 @@ def sample_times(duration: float, control_rate: float) -> np.ndarray:
     return np.minimum(np.arange(n + 1) / control_rate, duration)
 
 
-def limit_counts(
-    q: np.ndarray,
-    qd: np.ndarray,
-    qdd: np.ndarray,
-    pos: np.ndarray | None,
-    vel: np.ndarray,
-    acc: np.ndarray,
-    jerk: np.ndarray | None,
-    control_rate: float,
-) -> dict[str, int]:
-    """Counts of control-rate samples x joints beyond the limits (pathrl.limits.check)."""
+def limit_counts(q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, limits: PathLimits,
+                 control_rate: float) -> dict[str, int]:
+    """Counts of control-rate samples x joints (q, qd, qdd: (T, M)) beyond `limits` (pathrl.limits.check)."""
     import torch
 
     from pathrl.limits.check import limit_violations
     from pathrl.limits.feasible import JointLimits
 
     m = q.shape[1]
-    pos_lim = pos if pos is not None else np.tile([-np.inf, np.inf], (m, 1))
-    jerk_lim = jerk if jerk is not None else np.full(m, np.inf)
-    limits = JointLimits.from_arrays(pos_lim, vel, acc, jerk_lim)
+    pos_lim = limits.pos if limits.pos is not None else np.tile([-np.inf, np.inf], (m, 1))
+    jerk_lim = limits.jerk if limits.jerk is not None else np.full(m, np.inf)
+    joint_limits = JointLimits.from_arrays(pos_lim, limits.vel, limits.acc, jerk_lim)
     t = lambda a: torch.as_tensor(a, dtype=torch.float64)  # noqa: E731
-    out = limit_violations(t(q), t(qd), t(qdd), limits, 1.0 / control_rate, CHECK_RTOL)
+    out = limit_violations(t(q), t(qd), t(qdd), joint_limits, 1.0 / control_rate, CHECK_RTOL)
     return {k: int(v.sum()) for k, v in out.items() if k != "total"}
 
 

@@ -92,17 +92,12 @@ def _config(argv: list[str]) -> dict[str, Any]:
 
 def output_of(cfg: dict[str, Any]) -> Path:
     """Where the evaluation of `cfg` writes: ``out``, else the run directory, else (a shipped model in ``models/``)
-    ``runs/eval/<name>``; checked before any work (UserError: inside ``models/`` without ``write_models=true``,
-    a file, not writable)."""
+    ``runs/eval/<name>`` (:func:`pathrl.eval.evaluate.output_dir_of`); checked before any work (UserError: inside
+    ``models/`` without ``write_models=true``, a file, not writable)."""
+    from pathrl.eval.evaluate import output_dir_of
     from pathrl.storage import inside_models
 
-    run_dir = Path(cfg["run_dir"])
-    if cfg["out"] is not None:
-        out = Path(cfg["out"])
-    elif inside_models(run_dir):
-        out = Path("runs", "eval", run_dir.resolve().name)
-    else:
-        out = run_dir
+    out = output_dir_of(Path(cfg["run_dir"]), None if cfg["out"] is None else Path(cfg["out"]))
     if inside_models(out) and not cfg["write_models"]:
         raise UserError(f"out={out} is inside models/ (the shipped policies); give another out= or pass "
                         "write_models=true to write the evaluation there")
@@ -129,7 +124,7 @@ def _path_files_as_dataset(run_dir: Path, dataset_path: str | None) -> str | Non
 
 def _main(argv: list[str]) -> None:
     from pathrl.dataset.io import DatasetError
-    from pathrl.eval.evaluate import evaluate
+    from pathrl.eval.evaluate import EvalOptions, evaluate
     from pathrl.runs import RunError, load_run
 
     if any(a in ("-h", "--help") for a in argv):
@@ -147,11 +142,12 @@ def _main(argv: list[str]) -> None:
         dataset_path = str(Path("data") / run_cfg["robot"]["name"] / cfg["dataset"]["name"])
     try:
         dataset_path = _path_files_as_dataset(run_dir, dataset_path)
-        m = evaluate(run_dir, dataset_path, cfg["split"], cfg["episodes"], cfg["segments"], cfg["seed"],
-                     out, num_envs=cfg["num_envs"],
-                     record=cfg["record"], task=cfg["task"], backend=cfg["backend"],
-                     compile_limits=cfg["compile_limits"], open_loop=cfg["open_loop"],
-                     checkpoint=cfg["checkpoint"], out_of_limits=cfg["dataset"]["out_of_limits"])
+        opts = EvalOptions(dataset_path, cfg["split"], cfg["episodes"], cfg["segments"], cfg["seed"], out,
+                           write_models=cfg["write_models"], num_envs=cfg["num_envs"], record=cfg["record"],
+                           task=cfg["task"], backend=cfg["backend"], compile_limits=cfg["compile_limits"],
+                           open_loop=cfg["open_loop"], checkpoint=cfg["checkpoint"],
+                           out_of_limits=cfg["dataset"]["out_of_limits"])
+        m = evaluate(run_dir, opts)
     except (RunError, DatasetError) as exc:
         raise UserError(str(exc)) from None
     _print_table(m)

@@ -1,4 +1,4 @@
-"""``pathrl-industrial``: motion-profile optimisation on the simulated industrial controller (issue 21).
+"""``pathrl-industrial``: motion-profile optimisation on the simulated industrial controller.
 
     pathrl-industrial table2 [key=value ...]   baseline + MPGD per evaluation trajectory -> out_table2 (Table II)
     pathrl-industrial speed  [key=value ...]   IWA + bisection on the speed command -> out_speed (cf. Table III)
@@ -114,6 +114,7 @@ def _main(argv: list[str]) -> None:
         _record(rest)
         return
     from pathrl.industrial import experiments, tables
+    from pathrl.industrial.iwa_env import IWASettings
 
     cfg, (controller, mpgd, search, rl), targets = _setup(rest)
     if cmd == "train":
@@ -131,16 +132,16 @@ def _main(argv: list[str]) -> None:
             return
         if cmd == "table2":
             policy, name = _policy(cfg["policy"])
-            rows = experiments.run_table2(targets, controller, mpgd, cfg["waypoints"], cfg["zone"], cfg["seed"],
-                                          policy, rl.k_max)
+            iwa = IWASettings(cfg["waypoints"], cfg["zone"], rl.k_max)
+            rows = experiments.run_table2(targets, controller, mpgd, iwa, cfg["seed"], policy)
             text = tables.table2_markdown(rows, command, note, name)
             if policy is not None and cfg["seed_runs"]:
                 text += _seed_summary(cfg, targets, controller, rl.k_max, rows)
             out = cfg["out_table2"]
         elif cmd == "speed":
             policy, name = _policy(cfg["policy"])
-            rows = experiments.run_speed(targets, controller, mpgd, search, cfg["waypoints"], cfg["zone"],
-                                         cfg["seed"], policy, rl.k_max)
+            iwa = IWASettings(cfg["waypoints"], cfg["zone"], rl.k_max)
+            rows = experiments.run_speed(targets, controller, mpgd, search, iwa, cfg["seed"], policy)
             text = tables.table3_markdown(rows, command, note, name if policy is not None else "MPGD")
             out = cfg["out_speed"]
         elif cmd == "table4":
@@ -240,7 +241,8 @@ def _record(argv: Sequence[str]) -> None:
     import torch
 
     from pathrl.industrial.experiments import select_targets
-    from pathrl.industrial.record import record_optimisation
+    from pathrl.industrial.iwa_env import IWASettings
+    from pathrl.industrial.record import Optimiser, record_optimisation
 
     own, rest = _record_keys(argv)
     cfg, (controller, mpgd, _, rl), _ = _setup(rest)
@@ -261,8 +263,8 @@ def _record(argv: Sequence[str]) -> None:
     policy, name = _policy(run) if own["method"] == "rl" else (None, "MPGD")
     try:
         out, result, kept = record_optimisation(
-            target, own["method"], controller, Path(own["out"]), mpgd=mpgd, policy=policy,
-            waypoints=cfg["waypoints"], zone=cfg["zone"], rl_k_max=rl.k_max, seed=cfg["seed"],
+            target, Optimiser(own["method"], mpgd, policy), controller, Path(own["out"]),
+            iwa=IWASettings(cfg["waypoints"], cfg["zone"], rl.k_max), seed=cfg["seed"],
             meta={"policy": run, "method_name": name, "command": " ".join(["pathrl-industrial", "record", *argv])})
     except ValueError as exc:
         raise UserError(f"record: {exc}") from None

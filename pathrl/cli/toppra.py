@@ -205,18 +205,11 @@ def main_(argv: list[str]) -> dict[str, Any]:
         episodes = paths.num_paths if segments == "full" else PAPER_EPISODES
     plan = evaluation_plan(paths, episodes, segments, int(cfg.seed))
 
-    from pathrl.baselines.toppra import GRID_STEP, MARGIN, solve_plan
+    from pathrl.baselines.toppra import GRID_STEP, MARGIN, ToppraSettings, solve_plan
 
-    results = solve_plan(
-        paths,
-        plan,
-        robot,
-        workers=int(cfg.workers),
-        progress=True,
-        control_rate=float(cfg.control_rate),
-        keep_trajectory=False,
-        track=bool(cfg.ruckig),
-    )
+    settings = ToppraSettings(control_rate=float(cfg.control_rate), keep_trajectory=False)
+    results = solve_plan(paths, plan, robot, settings, workers=int(cfg.workers), progress=True,
+                         track=bool(cfg.ruckig))
     meta = {
         "robot": robot.name,
         "dataset": data_dir.name,

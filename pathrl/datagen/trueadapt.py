@@ -31,7 +31,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -184,7 +184,7 @@ def level_plate_ik(ik: _LevelPlateIK, points: np.ndarray, tolerance: float) -> n
 
 def time_optimal_samples(q_path: np.ndarray, spec: RobotSpec, p: Mapping[str, Any]) -> np.ndarray | None:
     """TOPP-RA along the joint path (S, 7) under the scaled limits, sampled every sample_dt; (T, 7) or None."""
-    from pathrl.baselines.toppra import path_limits, solve_segment
+    from pathrl.baselines.toppra import ToppraSettings, path_limits, solve_segment
     from pathrl.paths.spline import PathError, dedupe_knots, knot_arc_lengths
 
     try:
@@ -193,8 +193,8 @@ def time_optimal_samples(q_path: np.ndarray, spec: RobotSpec, p: Mapping[str, An
     except PathError:
         return None
     lim = path_limits(spec)
-    res = solve_segment(knots, 0.0, length, lim["vel"] * float(p["vel_scale"]), lim["acc"] * float(p["acc_scale"]),
-                        lim["pos"], control_rate=1.0 / float(p["sample_dt"]), jerk_limits=lim["jerk"])
+    lim = replace(lim, vel=lim.vel * float(p["vel_scale"]), acc=lim.acc * float(p["acc_scale"]))
+    res = solve_segment(knots, 0.0, length, lim, ToppraSettings(control_rate=1.0 / float(p["sample_dt"])))
     if not res.ok or len(res.q) < 3:
         return None
     return res.q

@@ -28,7 +28,7 @@ from tensordict import TensorDict
 from torch import Tensor
 
 from pathrl.envs.path_change_cfg import PathChangeCfg
-from pathrl.paths.branch import branch_knots, dedupe_padded, tabulate_batch
+from pathrl.paths.branch import BranchShape, BranchStart, branch_knots, dedupe_padded, tabulate_batch
 
 __all__ = ["PathChangeCfg", "PathChanges", "with_path_changes"]
 
@@ -161,9 +161,10 @@ class PathChanges:
         offset = size.unsqueeze(1) * direction / direction.norm(dim=1, keepdim=True).clamp(min=1e-12)
         p = env.paths
         k = p.knots.shape[1] - 2  # room left for the two start knots
-        knots, count = branch_knots(p.knots[seg, :k], p.knot_s[seg, :k], env.end_knot[ids].clamp(max=k - 1),
-                                    env.s[ids], env.pos[ids][:, env.path_index], env.vel[ids][:, env.path_index],
-                                    offset, ramp, self.pos_limits, cfg.lead_s, cfg.margin)
+        start = BranchStart(env.s[ids], env.pos[ids][:, env.path_index], env.vel[ids][:, env.path_index])
+        shape = BranchShape(offset, ramp, self.pos_limits, cfg.lead_s, cfg.margin)
+        end = env.end_knot[ids].clamp(max=k - 1)
+        knots, count = branch_knots(p.knots[seg, :k], p.knot_s[seg, :k], end, start, shape)
         return dedupe_padded(knots, count)
 
 

@@ -18,7 +18,7 @@ from pathrl.envs.rewards import RewardTerm, StepQuantities
 from pathrl.paths.spline import arc_length_table, chord_params, dedupe_knots, fit_spline
 from pathrl.robot.model import RobotSpec
 
-__all__ = ["ReferencePath", "ReferenceStep", "ReferenceTrackingEnv"]
+__all__ = ["ReferencePath", "ReferenceSettings", "ReferenceStep", "ReferenceTrackingEnv"]
 
 
 class ReferencePath:
@@ -52,23 +52,43 @@ class ReferenceStep:
     dev_mean: float
 
 
+@dataclass(frozen=True)
+class ReferenceSettings:
+    """Settings of the reference env (those of :class:`~pathrl.envs.tracking_cfg.TrackingEnvCfg` it uses): the
+    knot gap D (rad) the observation is scaled by, `n_state` knots observed, decision step `dt` (s) split into
+    `substeps` deviation samples, episode budget (steps), rest tolerance (rad/s, rad/s^2), the stop bonus, the
+    deviation cut-off (rad; None: none), the knot observation (``relative`` | ``absolute``), the end observation and
+    the end tolerance (rad; None: the end is reached by arc length only)."""
+
+    knot_gap: float
+    n_state: int = 9
+    dt: float = 0.1
+    substeps: int = 8
+    budget_steps: int = 160
+    stop_tolerance: float = 0.01
+    stop_bonus: bool = True
+    max_deviation: float | None = None
+    knot_obs: str = "relative"
+    end_obs: bool = False
+    end_tolerance: float | None = None
+
+
 class ReferenceTrackingEnv:
-    """Single env with the same step order as the batched env (see its module docstring)."""
+    """Single env with the same step order as the batched env (see its module docstring): `path` from arc length
+    `start_s` to knot `end_knot`; `braking` (pos, vel, acc (D,) -> acc (D,)) is the end-of-path braking law."""
 
     def __init__(self, robot: RobotSpec, path: ReferencePath, start_s: float, end_knot: int,
-                 reward_terms: list[RewardTerm], knot_gap: float, n_state: int = 9, dt: float = 0.1,
-                 substeps: int = 8, budget_steps: int = 160, stop_tolerance: float = 0.01,
-                 stop_bonus: bool = True, max_deviation: float | None = None, braking=None,
-                 knot_obs: str = "relative", end_obs: bool = False, end_tolerance: float | None = None) -> None:
+                 reward_terms: list[RewardTerm], settings: ReferenceSettings, braking=None) -> None:
+        dt, n_state = settings.dt, settings.n_state
         self.robot, self.path, self.terms = robot, path, reward_terms
-        self.dt, self.substeps, self.n_state = dt, substeps, n_state
-        self.knot_gap, self.horizon = knot_gap, (n_state - 1) * knot_gap
-        self.budget, self.stop_tol = budget_steps, stop_tolerance
-        self.stop_bonus, self.max_dev = stop_bonus, max_deviation
+        self.dt, self.substeps, self.n_state = dt, settings.substeps, n_state
+        self.knot_gap, self.horizon = settings.knot_gap, (n_state - 1) * settings.knot_gap
+        self.budget, self.stop_tol = settings.budget_steps, settings.stop_tolerance
+        self.stop_bonus, self.max_dev = settings.stop_bonus, settings.max_deviation
         self.braking_law = braking
-        self.knot_obs = knot_obs
-        self.end_obs = end_obs
-        self.end_tolerance = end_tolerance
+        self.knot_obs = settings.knot_obs
+        self.end_obs = settings.end_obs
+        self.end_tolerance = settings.end_tolerance
         self.limiter = PosVelJerkLimitation(
             time_step=dt, pos_limits=robot.pos_limits.copy(),
             vel_limits=np.stack([-robot.vel_limits, robot.vel_limits], 1),

@@ -208,12 +208,8 @@ def check_task(cfg: dict[str, Any]) -> Task:
     return task
 
 
-def make_env(cfg: dict[str, Any], split: str = "train", *, num_envs: int | None = None, seed: int | None = None,
-             dataset_path: str | None = None, knot_gap_norm: float | None = None, paths: PathSet | None = None,
-             robot: RobotSpec | None = None, backend: str | None = None, open_loop: bool = False,
-             **overrides: Any):
-    """The env of a resolved run config's task on a dataset split (:class:`EnvRequest` documents the arguments;
-    `overrides` replace env settings, e.g. ``**EVAL_ENV``)."""
-    req = EnvRequest(split, num_envs, seed, dataset_path, knot_gap_norm, paths, robot, backend, open_loop,
-                     tuple(overrides.items()))
+def make_env(cfg: dict[str, Any], request: EnvRequest = EnvRequest(), **overrides: Any):
+    """The env of a resolved run config's task as `request` asks (:class:`EnvRequest`: the dataset split, its
+    overrides); `overrides` replace env settings too (after ``request.overrides``), e.g. ``**EVAL_ENV``."""
+    req = replace(request, overrides=request.overrides + tuple(overrides.items()))
     return get_task(cfg).build(cfg, req)

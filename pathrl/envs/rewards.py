@@ -98,7 +98,7 @@ def ball_centre(q: StepQuantities, margin: float = 0.06) -> Tensor:
 
     d = distance of the ball from the plate centre relative to the usable half-size (task value
     ``ball_dist``). The authors used the signed coordinates (only +x / +y offsets were penalized); the
-    distance penalizes every direction (issue 5).
+    distance penalizes an offset in every direction alike.
     """
     d, on = q.task["ball_dist"], q.task["ball_on_plate"]
     return (1.0 - (d / (1.0 - margin)).clamp(max=1.0)) ** 2 * on

@@ -68,7 +68,7 @@ def evaluate_curve(run_dir: Path, dataset: str, out_dir: Path, every: int = 50, 
     Each evaluation's metrics.json lands in ``out_dir/model_<k>/``; an existing one for the same dataset,
     segments and episode count is reused, so an interrupted curve continues where it stopped.
     """
-    from pathrl.eval.evaluate import evaluate
+    from pathrl.eval.evaluate import EvalOptions, evaluate
 
     steps_per_it = _steps_per_iteration(run_dir)
     points = []
@@ -78,8 +78,8 @@ def evaluate_curve(run_dir: Path, dataset: str, out_dir: Path, every: int = 50, 
         if m is None:
             if progress:
                 print(f"evaluate {ckpt}")
-            m = evaluate(run_dir, dataset_path=dataset, episodes=episodes, segments=segments, out_dir=out,
-                         record=False, progress=False, checkpoint=ckpt.name)
+            m = evaluate(run_dir, EvalOptions(dataset_path=dataset, episodes=episodes, segments=segments,
+                                              out_dir=out, record=False, progress=False, checkpoint=ckpt.name))
         points.append(CurvePoint(k + 1, (k + 1) * steps_per_it, checkpoint_wall_time(ckpt), float(m["duration_s"]),
                                  float(m["cart_pos_dev_mean_cm"]), int(m["limit_violations"])))
     return points

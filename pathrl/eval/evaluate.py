@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import os
 import time
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -12,7 +12,7 @@ import numpy as np
 import torch
 
 from pathrl.dataset.io import load_pathset
-from pathrl.envs.registry import EVAL_ENV, make_env, task_cfg
+from pathrl.envs.registry import EVAL_ENV, EnvRequest, make_env, task_cfg
 from pathrl.envs.terminations import TerminationReason
 from pathrl.envs.tracking import PathTrackingEnv
 from pathrl.eval.metrics import METRIC_KEYS, matched_samples, per_joint_errors, sample_deviations
@@ -34,91 +34,144 @@ from pathrl.logging.schema import (
     ROBOT_SCHEMA_NAME,
 )
 from pathrl.paths.knots import KnotStrategy
+from pathrl.paths.pathset import PathSet
 from pathrl.paths.segments import evaluation_plan
 from pathrl.robot.kinematics import ForwardKinematics
 from pathrl.robot.model import RobotSpec, load_robot
 from pathrl.runs import RunError, committed_split, load_policy, load_run, make_controller, policy_scale
-from pathrl.storage import write_json_atomic
+from pathrl.storage import inside_models, write_json_atomic
 
-__all__ = ["FAILURE_METRIC", "PYBULLET_ENVS", "evaluate", "write_episodes_mcap"]
+__all__ = ["FAILURE_METRIC", "PYBULLET_ENVS", "EvalOptions", "evaluate", "output_dir_of", "write_episodes_mcap"]
 
 
-def evaluate(
-    run_dir: Path,
-    dataset_path: str | None = None,
-    split: str = "test",
-    episodes: int | None = None,
-    segments: str = "paper",
-    seed: int = 0,
-    out_dir: Path | None = None,
-    num_envs: int = 1200,
-    record: bool = True,
-    progress: bool = True,
-    task: str | None = None,
-    backend: str = "pybullet",
-    compile_limits: bool = False,
-    open_loop: bool = False,
-    checkpoint: str | None = None,
-    out_of_limits: str = "refuse",
-) -> dict[str, Any]:
-    """Evaluate the policy of `run_dir` deterministically; write metrics.json (+ episodes.mcap).
+@dataclass(frozen=True)
+class EvalOptions:
+    """How :func:`evaluate` evaluates a run (the keys of ``pathrl-eval``, :class:`pathrl.schema.EvalAppCfg`).
 
-    Runs with a feedback task are evaluated with the `backend` simulator (PyBullet by default, whatever
-    they were trained with). `task` adds a task to a run trained without one (e.g. ``ball_on_plate``: the
-    ball rides along unobserved, as the paper's "no balancing reward" row). A task failure (ball off the
-    plate) does not end an evaluation episode: the tracking metrics cover the whole path and the failure
-    is reported per episode (``task_failed``) and as ``task_failed_pct``. ``compile_limits``: the rollouts run
-    with compiled limit kernels (:class:`pathrl.limits.backend.LimitBackend`; same results to rounding); off by
-    default: an evaluation is a few hundred steps, too short to earn back the per-process tracing (iiwa7, 1200
-    episodes: 17 s eager, 35 s compiled).
-    ``open_loop``: the task's sensor stays at its first value of each episode (:class:`FrozenSensor`).
-    ``checkpoint``: a checkpoint file name in `run_dir` (e.g. ``model_99.pt``) instead of the latest one.
-    ``out_of_limits``: paths of the dataset that leave the robot's position limits are refused or clipped.
-    A model-based controller's directory (``controller:`` in its config,
-    :func:`pathrl.runs.make_controller`) evaluates like a policy.
+    ``dataset_path``: None for the run's own dataset (its committed `split`). ``episodes``: None for one per path
+    with ``segments="full"``, else 1200. ``out_dir``: None for :func:`output_dir_of` (never inside ``models/``
+    unless ``write_models``). ``task`` adds a feedback task to a run trained without one (e.g. ``ball_on_plate``:
+    the ball rides along unobserved, as the paper's "no balancing reward" row); a run with a task is simulated with
+    ``backend`` (PyBullet by default, whatever it was trained with). ``compile_limits``: the rollouts run with
+    compiled limit kernels (:class:`pathrl.limits.backend.LimitBackend`; same results to rounding); off by default:
+    an evaluation is a few hundred steps, too short to earn back the per-process tracing (iiwa7, 1200 episodes:
+    17 s eager, 35 s compiled). ``open_loop``: the task's sensor stays at its first value of each episode
+    (:class:`FrozenSensor`). ``checkpoint``: a checkpoint file name in the run directory (e.g. ``model_99.pt``)
+    instead of the latest one. ``out_of_limits``: paths of the dataset that leave the robot's position limits are
+    refused or clipped (``refuse`` | ``clip``).
     """
+
+    dataset_path: str | None = None
+    split: str = "test"
+    episodes: int | None = None
+    segments: str = "paper"  # paper | full
+    seed: int = 0
+    out_dir: Path | None = None
+    write_models: bool = False  # allow an output directory inside models/ (the shipped policies)
+    num_envs: int = 1200
+    record: bool = True  # also write episodes.mcap
+    progress: bool = True
+    task: str | None = None
+    backend: str = "pybullet"  # pybullet | analytic
+    compile_limits: bool = False
+    open_loop: bool = False
+    checkpoint: str | None = None
+    out_of_limits: str = "refuse"
+
+
+def output_dir_of(run_dir: Path, out_dir: Path | None = None) -> Path:
+    """Where an evaluation of `run_dir` writes: `out_dir` if given, else the run directory, except for a shipped
+    model (a directory under ``models/``, :func:`pathrl.storage.inside_models`): ``runs/eval/<name>`` (relative to the
+    working directory), so that nothing is written into ``models/`` unless asked."""
+    if out_dir is not None:
+        return Path(out_dir)
+    if inside_models(run_dir):
+        return Path("runs", "eval", Path(run_dir).resolve().name)
+    return Path(run_dir)
+
+
+def _checked_out_dir(run_dir: Path, opts: EvalOptions) -> Path:
+    """:func:`output_dir_of` `run_dir`; RunError if it is inside ``models/`` and ``opts.write_models`` is off."""
+    out = output_dir_of(run_dir, opts.out_dir)
+    if inside_models(out) and not opts.write_models:
+        raise RunError(f"out_dir {out} is inside models/ (the shipped policies); give another out_dir or set "
+                       "write_models to write the evaluation there")
+    return out
+
+
+def evaluate(run_dir: Path, opts: EvalOptions = EvalOptions()) -> dict[str, Any]:
+    """Evaluate the policy of `run_dir` deterministically as `opts` says; write
+    metrics.json (+ episodes.mcap) into :func:`output_dir_of` (checked first) and return the metrics.
+
+    A task failure (ball off the plate) does not end an evaluation episode: the tracking metrics cover the whole
+    path and the failure is reported per episode (``task_failed``) and as ``task_failed_pct``. A model-based
+    controller's directory (``controller:`` in its config, :func:`pathrl.runs.make_controller`) evaluates like a
+    policy.
+    """
+    out = _checked_out_dir(run_dir, opts)
     torch.set_num_threads(int(os.environ.get("PATHRL_THREADS", "1")))
     cfg, ckpt, summary = load_run(run_dir)
-    ckpt = _checkpoint(run_dir, ckpt, checkpoint)
+    ckpt = _checkpoint(run_dir, ckpt, opts.checkpoint)
     gap = policy_scale(run_dir, summary) if ckpt is not None else summary.get("knot_gap_norm")
-    cfg = _with_task(cfg, task)
+    cfg = _with_task(cfg, opts.task)
     robot = load_robot(cfg["robot"])
     knots = KnotStrategy.from_cfg(cfg["knots"])
-    ds_path = dataset_path or committed_split(cfg["dataset"]["path"], split)
-    paths = load_pathset(ds_path, split, knots, robot=robot, out_of_limits=out_of_limits)
+    ds_path = opts.dataset_path or committed_split(cfg["dataset"]["path"], opts.split)
+    paths = load_pathset(ds_path, opts.split, knots, robot=robot, out_of_limits=opts.out_of_limits)
+    episodes = opts.episodes
     if episodes is None:
-        episodes = paths.num_paths if segments == "full" else 1200
-    plan = evaluation_plan(paths, episodes, segments, seed)
+        episodes = paths.num_paths if opts.segments == "full" else 1200
+    plan = evaluation_plan(paths, episodes, opts.segments, opts.seed)
     if gap is None:  # a controller's directory without a summary: D of its training split, as in training
         gap = load_pathset(cfg["dataset"]["path"], "train", knots, robot=robot).max_knot_gap()
     # The deviation cut-off is a training device; evaluation tracks every episode to its end or budget (EVAL_ENV).
     has_task = task_cfg(cfg)["feedback"] is not None
-    if has_task and backend == "pybullet":
+    num_envs = opts.num_envs
+    if has_task and opts.backend == "pybullet":
         num_envs = min(num_envs, PYBULLET_ENVS)  # one PyBullet client per env
-    if open_loop and not has_task:
+    if opts.open_loop and not has_task:
         raise RunError("open_loop=true: the run has no feedback task to freeze (give task=...)")
+    request = EnvRequest(opts.split, num_envs=min(num_envs, episodes), seed=opts.seed, knot_gap_norm=gap,
+                         paths=paths, robot=robot, backend=opts.backend, open_loop=opts.open_loop)
     try:  # task / robot mismatch, a scene that cannot be built
-        env = make_env(cfg, split, num_envs=min(num_envs, episodes), seed=seed, knot_gap_norm=gap, paths=paths,
-                       robot=robot, backend=backend, open_loop=open_loop, **EVAL_ENV)
+        env = make_env(cfg, request, **EVAL_ENV)
     except (ValueError, RuntimeError) as exc:
         raise RunError(str(exc)) from None
     try:
-        if "controller" in cfg:
-            try:
-                policy = make_controller(cfg["controller"], env)
-            except ValueError as exc:
-                raise RunError(f"{run_dir}: {exc}") from None
-        else:
-            policy = load_policy(cfg, env, ckpt)
+        policy = _policy(run_dir, cfg, env, ckpt)
         t0 = time.perf_counter()
-        with replace(current(), compiled=compile_limits).active():
-            records = _run(env, policy, plan, episodes, progress)
+        with replace(current(), compiled=opts.compile_limits).active():
+            records = _run(env, policy, plan, episodes, opts.progress)
         rollout_s = time.perf_counter() - t0
     finally:
         if env.feedback is not None:
             env.feedback.close()
-    return _finish(records, rollout_s, env, robot, paths, ds_path, split, segments, seed, run_dir, ckpt, out_dir,
-                   record, cfg if has_task else None, open_loop)
+    source = _Source(run_dir, ckpt, ds_path, robot, env, paths, cfg if has_task else None)
+    return _finish(records, rollout_s, source, opts, out)
+
+
+@dataclass(frozen=True)
+class _Source:
+    """What the rollouts ran: the run directory and its checkpoint (None: a controller), the dataset path, the robot,
+    the env and its path bank, and the run config if it has a feedback task (None: path tracking only)."""
+
+    run_dir: Path
+    ckpt: Path | None
+    ds_path: str
+    robot: RobotSpec
+    env: PathTrackingEnv
+    paths: PathSet
+    task_run_cfg: dict[str, Any] | None
+
+
+def _policy(run_dir: Path, cfg: dict[str, Any], env: PathTrackingEnv, ckpt: Path | None):
+    """The run's policy at `ckpt`, or its model-based controller (``controller:`` in `cfg`)."""
+    if "controller" not in cfg:
+        return load_policy(cfg, env, ckpt)
+    try:
+        return make_controller(cfg["controller"], env)
+    except ValueError as exc:
+        raise RunError(f"{run_dir}: {exc}") from None
 
 
 def _checkpoint(run_dir: Path, latest: Path | None, name: str | None) -> Path | None:
@@ -160,9 +213,11 @@ def _run(env: PathTrackingEnv, policy, plan, episodes: int, progress: bool) -> l
     return records
 
 
-def _finish(records, rollout_s, env, robot, paths, ds_path, split, segments, seed, run_dir, ckpt, out_dir, record,
-            task_run_cfg, open_loop: bool = False) -> dict[str, Any]:
-    """Per-episode and aggregate metrics of the rollouts; writes metrics.json (+ episodes.mcap)."""
+def _finish(records: list[EpisodeRecord], rollout_s: float, src: _Source, opts: EvalOptions,
+            out: Path) -> dict[str, Any]:
+    """Per-episode and aggregate metrics of the rollouts (`rollout_s`: their wall time, s); writes metrics.json
+    (+ episodes.mcap) into `out`."""
+    robot, env, paths = src.robot, src.env, src.paths
     t0 = time.perf_counter()
     fk = ForwardKinematics(robot)
     limits = JointLimits.from_robot(robot)
@@ -172,21 +227,21 @@ def _finish(records, rollout_s, env, robot, paths, ds_path, split, segments, see
     devs = sample_deviations(setpoints, matched, path_index, fk)
     per_episode = [_episode_metrics(r, dev, env, limits, paths) for r, dev in zip(records, devs, strict=True)]
     per_joint = per_joint_errors(torch.cat([e - r for e, r in matched]), robot.path_joints)
-    metrics = _aggregate(per_episode, robot, ds_path, split, segments, seed, per_joint)
-    if task_run_cfg is not None:
-        t = task_cfg(task_run_cfg)
+    metrics = _aggregate(per_episode, robot, src.ds_path, opts.split, opts.segments, opts.seed, per_joint)
+    if src.task_run_cfg is not None:
+        t = task_cfg(src.task_run_cfg)
         backend = type(getattr(env.feedback, "inner", env.feedback)).__name__
-        metrics["task"] = {"name": t["name"], "backend": backend, "observed": t["observe"], "open_loop": open_loop}
+        metrics["task"] = {"name": t["name"], "backend": backend, "observed": t["observe"],
+                           "open_loop": opts.open_loop}
         metrics["task_failed_pct"] = 100.0 * float(np.mean([p["task_failed"] for p in per_episode]))
         metrics[FAILURE_METRIC[t["feedback"]]] = metrics["task_failed_pct"]
         metrics["task_failed_after_end_pct"] = 100.0 * float(np.mean([p["task_failed_after_end"] for p in per_episode]))
     metrics["eval_wall_time_s"] = time.perf_counter() - t0 + rollout_s
     metrics["rollout_wall_time_s"] = rollout_s
-    metrics["run_dir"] = str(run_dir)
-    metrics["checkpoint"] = ckpt.name if ckpt is not None else None
-    out = Path(out_dir) if out_dir else Path(run_dir)
+    metrics["run_dir"] = str(src.run_dir)
+    metrics["checkpoint"] = src.ckpt.name if src.ckpt is not None else None
     out.mkdir(parents=True, exist_ok=True)
-    if record:
+    if opts.record:
         write_episodes_mcap(out / "episodes.mcap", robot, paths, records, per_episode, fk)
     write_json_atomic(out / "metrics.json", metrics)
     return metrics

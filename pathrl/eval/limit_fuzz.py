@@ -36,7 +36,7 @@ from pathrl.limits.integrate import interpolate_step
 from pathrl.paths.knots import KnotStrategy
 from pathrl.robot.external import load_robot_by_name
 
-__all__ = ["DATASETS", "STREAMS", "FuzzResult", "fuzz_env", "fuzz_report"]
+__all__ = ["DATASETS", "STREAMS", "FuzzResult", "Perturbations", "fuzz_env", "fuzz_report"]
 
 
 STREAMS = ("uniform", "bang_bang", "sticky", "chatter", "nan_inf")
@@ -61,10 +61,21 @@ class FuzzResult:
     seconds: float = 0.0
 
 
+@dataclass(frozen=True)
+class Perturbations:
+    """Per env and step, the probabilities of a restart at rest on the position limits, of a restart on a fresh
+    path segment and of a switch to the braking law (module docstring)."""
+
+    limit_restart_p: float = 0.005
+    path_restart_p: float = 0.005
+    brake_p: float = 0.001
+
+
 def fuzz_env(robot_name: str, steps: int, num_envs: int = 4096, seed: int = 0, root: Path | str = ".",
-             limit_restart_p: float = 0.005, path_restart_p: float = 0.005, brake_p: float = 0.001,
-             rtol: float = 1e-6) -> FuzzResult:
-    """Run `steps` decision steps of `num_envs` fuzzed envs of `robot_name` (see the module docstring)."""
+             perturb: Perturbations = Perturbations(), rtol: float = 1e-6) -> FuzzResult:
+    """Run `steps` decision steps of `num_envs` fuzzed envs of `robot_name` on its dataset under `root`, perturbed
+    as `perturb` says; a setpoint beyond a limit by more than `rtol` (relative) is a violation (see the module
+    docstring)."""
     if steps < 1 or num_envs < 1:
         raise ValueError(f"steps and num_envs must be >= 1, got {steps} and {num_envs}")
     robot = load_robot_by_name(robot_name)
@@ -97,7 +108,7 @@ def fuzz_env(robot_name: str, steps: int, num_envs: int = 4096, seed: int = 0, r
             mode == 2, held, torch.where(mode == 3, chatter, noisy))))
         out.nonfinite_actions += int((~torch.isfinite(actions)).sum())
 
-        _restarts(env, g, lo, hi, limit_restart_p, path_restart_p, brake_p, out)
+        _restarts(env, g, lo, hi, perturb, out)
         p0, v0, a0 = env.pos.clone(), env.vel.clone(), env.acc.clone()
         env.step(actions)
         p, v, a = interpolate_step(p0, v0, a0, env.acc, cfg.dt, env.control_steps)
@@ -110,9 +121,11 @@ def fuzz_env(robot_name: str, steps: int, num_envs: int = 4096, seed: int = 0, r
     return out
 
 
-def _restarts(env: PathTrackingEnv, g: torch.Generator, lo: Tensor, hi: Tensor, limit_p: float, path_p: float,
-              brake_p: float, out: FuzzResult) -> None:
-    """Random restarts on the position limits (at rest), on fresh path segments, and switches to braking."""
+def _restarts(env: PathTrackingEnv, g: torch.Generator, lo: Tensor, hi: Tensor, perturb: Perturbations,
+              out: FuzzResult) -> None:
+    """Random restarts on the position limits `lo`, `hi` (D,) (at rest), on fresh path segments, and switches to
+    braking (probabilities `perturb`), counted in `out`."""
+    limit_p, path_p, brake_p = perturb.limit_restart_p, perturb.path_restart_p, perturb.brake_p
     n, d = env.pos.shape
     u = torch.rand(n, generator=g)
     at_limit = (u < limit_p).nonzero().squeeze(1)

@@ -35,6 +35,7 @@ import torch
 from pathrl.deploy import Follower
 from pathrl.limits.check import limit_violations
 from pathrl.limits.feasible import JointLimits
+from pathrl.paths.branch import BranchShape, BranchStart
 from pathrl.paths.spline import knot_arc_lengths
 
 __all__ = ["OFFSET_RAD", "RAMP_RAD", "SWITCH_RANGE", "VARIANTS", "SwitchEpisode", "branch", "excess_vs_control", "main",
@@ -124,12 +125,14 @@ def paired_settle(episodes: list[SwitchEpisode], control: list[SwitchEpisode], l
             [excess_vs_control(d, c, level, dt) for d, c in pairs])
 
 
-def branch(knots: np.ndarray, s_now: float, q_now: np.ndarray, v_now: np.ndarray, offset: np.ndarray, ramp: float,
-           pos_limits: np.ndarray, lead_s: float = 0.1, margin: float = 0.02) -> np.ndarray:
-    """Knots (K', M) of a path from `q_now` (moving at `v_now`: a second knot at q_now + lead_s v_now makes the
-    path start in the direction of motion) along the knots of `knots` (K, M) past arc length
-    s_now + lead_s |v_now|, shifted by w(s - s_now) `offset` (w: smoothstep from 0 to 1 over `ramp` rad) and
-    kept `margin` inside `pos_limits` (M, 2)."""
+def branch(knots: np.ndarray, start: BranchStart, shape: BranchShape) -> np.ndarray:
+    """Knots (K', M) of a path from ``start.q`` (moving at ``start.v``: a second knot at q + lead_s v makes the path
+    start in the direction of motion) along the knots of `knots` (K, M) past arc length s + lead_s |v|, shifted by
+    w(s' - s) ``shape.offset`` (w: smoothstep from 0 to 1 over ``shape.ramp`` rad) and kept ``shape.margin`` inside
+    ``shape.pos_limits`` (M, 2). `start` and `shape` of one path (numpy)."""
+    s_now, q_now, v_now = start.s, start.q, start.v
+    offset, ramp, pos_limits = shape.offset, shape.ramp, shape.pos_limits
+    lead_s, margin = shape.lead_s, shape.margin
     s_k, _ = knot_arc_lengths(knots)
     lead = lead_s * float(np.linalg.norm(v_now))
     keep = s_k > s_now + lead + 1e-6
@@ -147,8 +150,8 @@ def _switch(direction: np.ndarray, follower: Follower, offset_rad: float, ramp_r
     idx = env.path_index.numpy()
     lim = JointLimits.from_robot(follower.robot).pos[env.path_index].numpy()
     current = env.paths.knots[0, : int(env.paths.num_knots[0])].numpy()
-    return branch(current, float(follower.env.s[0]), follower.state[0][idx], follower.state[1][idx],
-                  offset_rad * direction / np.linalg.norm(direction), ramp_rad, lim)
+    start = BranchStart(float(follower.env.s[0]), follower.state[0][idx], follower.state[1][idx])
+    return branch(current, start, BranchShape(offset_rad * direction / np.linalg.norm(direction), ramp_rad, lim))
 
 
 def _run(follower: Follower, decisions: int, out: list, devs: list | None) -> None:
@@ -234,7 +237,7 @@ def toppra_replan(follower: Follower, knots: list[np.ndarray], episodes: int, se
     rest: ``duration_s`` from the change to rest at the end, ``solve_ms``, ``violations`` (TOPP-RA's own; it
     has no jerk limit).
     """
-    from pathrl.baselines.toppra import solve_segment
+    from pathrl.baselines.toppra import PathLimits, ToppraSettings, solve_segment
     from pathrl.paths.spline import fit_spline
 
     rng = np.random.default_rng(seed)
@@ -248,8 +251,8 @@ def toppra_replan(follower: Follower, knots: list[np.ndarray], episodes: int, se
         _run(follower, k, [], None)
         direction = rng.standard_normal(follower.robot.path_dof)
         idx = follower.env.path_index.numpy()
-        vel, acc, pos = lim.vel[idx].numpy(), lim.acc[idx].numpy(), lim.pos[idx].numpy()
-        rate = follower.env_cfg.control_rate
+        limits = PathLimits(lim.vel[idx].numpy(), lim.acc[idx].numpy(), lim.pos[idx].numpy())
+        settings = ToppraSettings(control_rate=follower.env_cfg.control_rate, keep_trajectory=False)
         new = _switch(direction, follower, offset_rad, ramp_rad)
         spline = fit_spline(new)
         tangent = spline(0.0, 1)
@@ -257,14 +260,13 @@ def toppra_replan(follower: Follower, knots: list[np.ndarray], episodes: int, se
         v = follower.state[1][idx]
         along = float(v @ tangent)
         _, length = knot_arc_lengths(new)
-        moving = solve_segment(new, 0.0, length, vel, acc, pos, rate, keep_trajectory=False,
-                               start_rate=max(along, 0.0))
+        moving = solve_segment(new, 0.0, length, limits, settings, start_rate=max(along, 0.0))
         follower.stop()
         braking: list = []
         _run(follower, 100, braking, None)
         rest = _switch(direction, follower, offset_rad, ramp_rad)
         _, length = knot_arc_lengths(rest)
-        res = solve_segment(rest, 0.0, length, vel, acc, pos, rate, keep_trajectory=False)
+        res = solve_segment(rest, 0.0, length, limits, settings)
         rows.append({"path": a, "switch_s": k * dt, "from_motion_feasible": moving.status != "infeasible",
                      "normal_speed": float(np.linalg.norm(v - along * tangent)), "braking_s": len(braking) * dt,
                      "solve_ms": 1e3 * res.solve_time_s, "duration_s": len(braking) * dt + res.duration_s,

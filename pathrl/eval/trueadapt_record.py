@@ -1,4 +1,4 @@
-"""Recording TrueAdapt adaptation episodes (issue 20) to ``trueadapt.mcap`` for ``pathrl-view``.
+"""Recording TrueAdapt adaptation episodes to ``trueadapt.mcap`` for ``pathrl-view``.
 
 :func:`record_trueadapt` runs trajectories of a :class:`~pathrl.envs.trueadapt.TrueAdaptEnv` (built with
 ``autoreset=False``) under an actor, ``env.num_envs`` at a time like :func:`pathrl.eval.trueadapt.evaluate`, and

@@ -1,4 +1,4 @@
-"""Motion-profile optimisation for industrial robots (issue 21; Wen et al.): an ABB IRB 6640 model, a simulated
+"""Motion-profile optimisation for industrial robots (Wen et al.): an ABB IRB 6640 model, a simulated
 controller executing MoveL / MoveJ programs with blend zones, target trajectories and metrics, iterative waypoint
 adjustment by MPGD or a learned TD3 policy, and the bisection on the speed command. See ``docs/industrial.md``.
 

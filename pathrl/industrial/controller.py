@@ -31,8 +31,8 @@ path is curved even when the TCP's is straight): measured 0.002 / 0.04 / 0.6 mm 
 share, which grows with speed.
 **Two models** share this interface, chosen by ``ControllerParams.model``: ``"lag"`` (the default, the one described
 above, which the shipped tables and policies were made with) and ``"abb"``, the model calibrated to a recorded
-ABB controller (issue 47): the queue planner of :mod:`pathrl.industrial.planner` (finite look-ahead, zones that
-shrink or degrade to fine points with a reported corner event, orientation blended across zones,
+ABB controller (docs/industrial.md): the queue planner of :mod:`pathrl.industrial.planner` (finite look-ahead, zones
+that shrink or degrade to fine points with a reported corner event, orientation blended across zones,
 speed-dependent corner cut), the rigid-body dynamics of :mod:`pathrl.industrial.dynamics` (PyBullet) under the
 elastic, frictional, torque-limited drives and cascaded servo loops of :mod:`pathrl.industrial.drives`, and
 execution variation (start jitter, friction change, slow drift, noise), all seeded by ``seed``.
@@ -73,7 +73,7 @@ class ControllerParams:
     settle_s: float = 0.3  # s, servo settling after the last setpoint
     noise_mm: float = 0.0  # mm, std of the measurement noise on TCP positions
     runs: int = 1  # noisy runs averaged
-    model: str = "lag"  # "lag" (this module's servo lag) or "abb" (the calibrated model, issue 47)
+    model: str = "lag"  # "lag" (this module's servo lag) or "abb" (the model calibrated to a recorded controller)
     planner: PlannerParams = field(default_factory=PlannerParams)  # "abb": the path planner
     drives: DriveParams = field(default_factory=DriveParams)  # "abb": drives, servo, execution variation
 

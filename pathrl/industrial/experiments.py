@@ -8,7 +8,7 @@ from collections.abc import Callable, Sequence
 import numpy as np
 
 from pathrl.industrial.controller import ControllerParams, execute
-from pathrl.industrial.iwa_env import IWAEpisode
+from pathrl.industrial.iwa_env import IWAEpisode, IWASettings
 from pathrl.industrial.metrics import evaluate
 from pathrl.industrial.mpgd import MPGDParams, run_mpgd
 from pathrl.industrial.rl import run_policy_iwa
@@ -28,17 +28,19 @@ def select_targets(rows: Sequence[str]) -> list[Target]:
     return [t for t in evaluation_targets() if not rows or t.name in rows]
 
 
-def run_table2(targets: Sequence[Target], controller: ControllerParams, mpgd: MPGDParams, waypoints: int = 100,
-               zone: float = 10.0, seed: int = 0, policy: Callable[[np.ndarray], np.ndarray] | None = None,
-               rl_k_max: int = 10) -> list[Table2Row]:
-    """Baseline (the m-MoveL profile) and MPGD on each target at its speed command; with a `policy` (features
-    (m, 313) -> actions (m, 3)) also the learned IWA (k_max = `rl_k_max`)."""
+def run_table2(targets: Sequence[Target], controller: ControllerParams, mpgd: MPGDParams,
+               iwa: IWASettings | None = None, seed: int = 0,
+               policy: Callable[[np.ndarray], np.ndarray] | None = None) -> list[Table2Row]:
+    """Baseline (the profile of ``iwa.m`` MoveL waypoints, zone ``iwa.zone``; `iwa` default :class:`IWASettings`)
+    and MPGD (seed `seed`) on each target at its speed command; with a `policy` (features (m, 313) -> actions
+    (m, 3)) also the learned IWA (``iwa.k_max`` iterations)."""
+    iwa = iwa or IWASettings()
     rows = []
     for t in targets:
-        res = run_mpgd(t, baseline_program(t, waypoints, zone), t.speed, mpgd, controller, seed)
+        res = run_mpgd(t, baseline_program(t, iwa.m, iwa.zone), t.speed, mpgd, controller, seed)
         rl: dict[str, object] = {}
         if policy is not None:
-            out = run_policy_iwa(IWAEpisode(t, t.speed, controller, waypoints, zone, rl_k_max), policy)
+            out = run_policy_iwa(IWAEpisode(t, t.speed, controller, iwa), policy)
             rl = {"rl_mm": out.errors.max_pos_mm, "rl_itr": out.iterations_to_spec, "rl_t": out.t_opt}
         rows.append(Table2Row(t.name, t.pose, t.speed, res.history[0], res.errors.max_pos_mm,
                               res.iterations_to_spec, res.t_opt, res.executions, **rl))
@@ -46,17 +48,20 @@ def run_table2(targets: Sequence[Target], controller: ControllerParams, mpgd: MP
 
 
 def run_speed(targets: Sequence[Target], controller: ControllerParams, mpgd: MPGDParams, search: SearchParams,
-              waypoints: int = 100, zone: float = 10.0, seed: int = 0,
-              policy: Callable[[np.ndarray], np.ndarray] | None = None, rl_k_max: int = 10) -> list[Table3Row]:
-    """IWA + bisection on the speed command (paper Alg. 1) for each target, from its speed command; the IWA is
-    MPGD, or the `policy` (k_max = `rl_k_max`) if given."""
+              iwa: IWASettings | None = None, seed: int = 0,
+              policy: Callable[[np.ndarray], np.ndarray] | None = None) -> list[Table3Row]:
+    """IWA + bisection on the speed command (paper Alg. 1) for each target, from its speed command and the profile
+    of ``iwa.m`` MoveL waypoints, zone ``iwa.zone`` (`iwa` default :class:`IWASettings`); the IWA is MPGD (seed
+    `seed`), or the `policy` (``iwa.k_max`` iterations) if given."""
+    settings = iwa or IWASettings()
     rows = []
     for t in targets:
-        iwa = None
+        inner = None
         if policy is not None:
-            def iwa(prog, v, t=t):
-                return run_policy_iwa(IWAEpisode(t, v, controller, waypoints, zone, rl_k_max), policy)
-        res = bisection_search(t, t.speed, search, mpgd, controller, seed, baseline_program(t, waypoints, zone), iwa)
+            def inner(prog, v, t=t):
+                return run_policy_iwa(IWAEpisode(t, v, controller, settings), policy)
+        start = baseline_program(t, settings.m, settings.zone)
+        res = bisection_search(t, t.speed, search, mpgd, controller, seed, start, inner)
         if res.best is None:
             rows.append(Table3Row(t.name, None, float("nan"), float("nan"), float("nan"), res.t_total))
             continue
@@ -95,6 +100,6 @@ def run_table4(targets: Sequence[Target], controller: ControllerParams,
     for name, policy in policies.items():
         out[name] = []
         for t in targets:
-            res = run_policy_iwa(IWAEpisode(t, t.speed, controller, waypoints, zone, k_max), policy)
+            res = run_policy_iwa(IWAEpisode(t, t.speed, controller, IWASettings(waypoints, zone, k_max)), policy)
             out[name].append((t.name, res.errors.max_pos_mm, res.iterations_to_spec))
     return out

@@ -29,7 +29,7 @@ from pathrl.industrial.metrics import Errors, evaluate
 from pathrl.industrial.program import DEFAULT_SEED, Program
 from pathrl.industrial.trajectories import Target, baseline_program, waypoint_indices
 
-__all__ = ["IWAEpisode", "StepResult"]
+__all__ = ["IWAEpisode", "IWASettings", "StepResult"]
 
 
 @dataclass
@@ -44,17 +44,31 @@ class StepResult:
     errors: Errors | None
 
 
-class IWAEpisode:
-    """IWA on one target at speed command `v` (module doc)."""
+@dataclass(frozen=True)
+class IWASettings:
+    """One IWA episode's settings: the baseline profile of `m` MoveL waypoints with zone `zone` (mm), at most `k_max`
+    iterations, actions clipped to +-`action_clip` (the paper's 2), the reward weight `w_ori` of the orientation
+    improvement and the success reward's factor `success_decay` ^ k at iteration k."""
 
-    def __init__(self, target: Target, v: float, controller: ControllerParams | None = None, m: int = 100,
-                 zone: float = 10.0, k_max: int = 10, action_clip: float = 2.0, w_ori: float = 1.0,
-                 success_decay: float = 1.0) -> None:
-        self.target, self.v, self.k_max = target, float(v), int(k_max)
-        self.action_clip, self.w_ori, self.success_decay = float(action_clip), float(w_ori), float(success_decay)
+    m: int = 100
+    zone: float = 10.0
+    k_max: int = 10
+    action_clip: float = 2.0
+    w_ori: float = 1.0
+    success_decay: float = 1.0
+
+
+class IWAEpisode:
+    """IWA on one target at speed command `v` (mm/s) with `settings` (module doc)."""
+
+    def __init__(self, target: Target, v: float, controller: ControllerParams | None = None,
+                 settings: IWASettings = IWASettings()) -> None:
+        self.target, self.v, self.k_max = target, float(v), int(settings.k_max)
+        self.action_clip, self.w_ori = float(settings.action_clip), float(settings.w_ori)
+        self.success_decay = float(settings.success_decay)
         self.controller = ControllerParams() if controller is None else controller
-        self.m, self.zone = m, zone
-        self.psi = waypoint_indices(len(target.p), m)
+        self.m, self.zone = settings.m, settings.zone
+        self.psi = waypoint_indices(len(target.p), settings.m)
 
     def _observe(self, program: Program) -> tuple[np.ndarray, Errors, np.ndarray, np.ndarray]:
         ex = execute(program, self.v, self.controller)

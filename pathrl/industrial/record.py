@@ -1,4 +1,4 @@
-"""One waypoint optimisation (issue 21) with every execution kept, written to ``industrial.mcap`` for ``pathrl-view``.
+"""One waypoint optimisation with every execution kept, written to ``industrial.mcap`` for ``pathrl-view``.
 
 ``pathrl-industrial record traj=<row> method=mpgd|rl [policy=RUN_DIR] out=DIR`` runs the optimisation Table II
 runs for that row (:func:`pathrl.industrial.experiments.run_table2`: the baseline profile of ``waypoints`` MoveL
@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 
 from pathrl.industrial.controller import ControllerParams, Execution, execute
-from pathrl.industrial.iwa_env import IWAEpisode, StepResult
+from pathrl.industrial.iwa_env import IWAEpisode, IWASettings, StepResult
 from pathrl.industrial.metrics import POS_SPEC_MM, Errors, evaluate, position_errors
 from pathrl.industrial.mpgd import IWAResult, MPGDParams, run_mpgd
 from pathrl.industrial.program import Program
@@ -42,8 +42,8 @@ from pathrl.logging.schema import (
 from pathrl.storage import atomic_write
 
 __all__ = [
-    "Iteration", "best_iteration", "mpgd_iterations", "observe", "policy_iterations", "record_optimisation",
-    "write_industrial_mcap",
+    "Iteration", "Optimiser", "best_iteration", "mpgd_iterations", "observe", "policy_iterations",
+    "record_optimisation", "write_industrial_mcap",
 ]
 
 FILE_NAME = "industrial.mcap"
@@ -105,11 +105,11 @@ class _KeepingEpisode(IWAEpisode):
 
 
 def policy_iterations(target: Target, v: float, controller: ControllerParams,
-                      policy: Callable[[np.ndarray], np.ndarray], waypoints: int = 100, zone: float = 10.0,
-                      k_max: int = 10) -> tuple[IWAResult, list[Iteration]]:
-    """The learned IWA (:func:`~pathrl.industrial.rl.run_policy_iwa`, features (m, 313) -> actions (m, 3)) with
-    every execution kept."""
-    env = _KeepingEpisode(target, v, controller, waypoints, zone, k_max)
+                      policy: Callable[[np.ndarray], np.ndarray],
+                      iwa: IWASettings | None = None) -> tuple[IWAResult, list[Iteration]]:
+    """The learned IWA (:func:`~pathrl.industrial.rl.run_policy_iwa`, features (m, 313) -> actions (m, 3)) at speed
+    command `v` mm/s with `iwa` (default :class:`IWASettings`), every execution kept."""
+    env = _KeepingEpisode(target, v, controller, iwa or IWASettings())
     result = run_policy_iwa(env, policy)
     return result, env.kept
 
@@ -145,23 +145,35 @@ def write_industrial_mcap(path: Path, target: Target, method: str, iterations: l
     atomic_write(Path(path), write)
 
 
-def record_optimisation(target: Target, method: str, controller: ControllerParams, out_dir: Path, *,
-                        mpgd: MPGDParams | None = None, policy: Callable[[np.ndarray], np.ndarray] | None = None,
-                        waypoints: int = 100, zone: float = 10.0, rl_k_max: int = 10, seed: int = 0,
+@dataclass(frozen=True)
+class Optimiser:
+    """The optimiser of a recording: `method` ``mpgd`` (MPGD from the baseline profile with `mpgd`, default
+    :class:`~pathrl.industrial.mpgd.MPGDParams`) or ``rl`` (the IWA of `policy`, features (m, 313) -> actions
+    (m, 3))."""
+
+    method: str
+    mpgd: MPGDParams | None = None
+    policy: Callable[[np.ndarray], np.ndarray] | None = None
+
+
+def record_optimisation(target: Target, optimiser: Optimiser, controller: ControllerParams, out_dir: Path, *,
+                        iwa: IWASettings | None = None, seed: int = 0,
                         meta: dict[str, Any] | None = None) -> tuple[Path, IWAResult, list[Iteration]]:
-    """Optimise the waypoints of `target` at its speed command like Table II (``method`` mpgd: MPGD from the
-    baseline profile; rl: `policy`'s IWA) and write ``out_dir/industrial.mcap``; returns (file, result, kept)."""
+    """Optimise the waypoints of `target` at its speed command like Table II with `optimiser` (the baseline profile
+    and the learned IWA as `iwa` says, default :class:`IWASettings`; MPGD's seed `seed`) and write
+    ``out_dir/industrial.mcap`` (`meta`: extra fields of its target message); returns (file, result, kept)."""
     from pathrl.industrial.trajectories import baseline_program
 
+    method, iwa = optimiser.method, iwa or IWASettings()
     if method not in METHODS:
         raise ValueError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
     if method == "mpgd":
-        result, kept = mpgd_iterations(target, baseline_program(target, waypoints, zone), target.speed,
-                                       mpgd or MPGDParams(), controller, seed)
-    elif policy is None:
+        result, kept = mpgd_iterations(target, baseline_program(target, iwa.m, iwa.zone), target.speed,
+                                       optimiser.mpgd or MPGDParams(), controller, seed)
+    elif optimiser.policy is None:
         raise ValueError("method rl needs a policy")
     else:
-        result, kept = policy_iterations(target, target.speed, controller, policy, waypoints, zone, rl_k_max)
+        result, kept = policy_iterations(target, target.speed, controller, optimiser.policy, iwa)
     out = Path(out_dir) / FILE_NAME
     out.parent.mkdir(parents=True, exist_ok=True)
     write_industrial_mcap(out, target, method, kept, result, target.speed, meta)

@@ -24,7 +24,7 @@ import torch
 
 from pathrl.industrial.controller import ControllerParams
 from pathrl.industrial.features import N_FEATURES
-from pathrl.industrial.iwa_env import IWAEpisode
+from pathrl.industrial.iwa_env import IWAEpisode, IWASettings
 from pathrl.industrial.per import PrioritizedBuffer
 from pathrl.industrial.rl import N_ACTIONS, RLParams, TD3Agent
 from pathrl.industrial.trajectories import Target, type1, type1_random
@@ -112,8 +112,8 @@ def train(run_dir: Path, params: RLParams, controller: ControllerParams, m: int 
         for it in range(start, params.iterations):
             if env is None:
                 target = training_target(int(rng.integers(params.n_train)), params.seed)
-                env = IWAEpisode(target, target.speed, controller, m, zone, params.k_max, 2.0, params.w_ori,
-                                 params.success_decay)
+                settings = IWASettings(m, zone, params.k_max, 2.0, params.w_ori, params.success_decay)
+                env = IWAEpisode(target, target.speed, controller, settings)
                 obs, episodes = env.reset(), episodes + 1
             action = _explore(agent, obs, it, params, rng)
             res = env.step(params.action_clip * action)

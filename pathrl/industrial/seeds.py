@@ -19,7 +19,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from pathrl.industrial.controller import ControllerParams
-from pathrl.industrial.iwa_env import IWAEpisode
+from pathrl.industrial.iwa_env import IWAEpisode, IWASettings
 from pathrl.industrial.rl import run_policy_iwa
 from pathrl.industrial.rl_train import POSE_SPEEDS
 from pathrl.industrial.tables import Table2Row, ratios
@@ -72,7 +72,7 @@ def run_policy_rows(targets: Sequence[Target], policy: Policy, controller: Contr
     """The learned IWA of `policy` on each target at its speed command."""
     out = []
     for t in targets:
-        res = run_policy_iwa(IWAEpisode(t, t.speed, controller, waypoints, zone, k_max), policy)
+        res = run_policy_iwa(IWAEpisode(t, t.speed, controller, IWASettings(waypoints, zone, k_max)), policy)
         out.append(RowResult(t.name, res.errors.max_pos_mm, res.iterations_to_spec, res.executions, res.t_opt))
     return out
 

@@ -21,7 +21,7 @@ import numpy as np
 from pathrl.industrial import arm
 from pathrl.industrial.controller import ControllerParams, Execution, execute
 from pathrl.industrial.features import features, match
-from pathrl.industrial.iwa_env import IWAEpisode
+from pathrl.industrial.iwa_env import IWAEpisode, IWASettings
 from pathrl.industrial.metrics import POS_SPEC_MM, evaluate
 from pathrl.industrial.mpgd import MPGDParams, mpgd_update, run_mpgd
 from pathrl.industrial.program import DEFAULT_SEED, Program
@@ -78,7 +78,7 @@ def time_row(target: Target, ctrl: ControllerParams, mpgd: MPGDParams, policy: C
     visited: list[Program] = []
     res = run_mpgd(target, baseline_program(target, waypoints, zone), target.speed, mpgd, ctrl, seed,
                    on_execution=lambda k, prog, ex: visited.append(prog))
-    env = IWAEpisode(target, target.speed, ctrl, waypoints, zone, k_max)
+    env = IWAEpisode(target, target.speed, ctrl, IWASettings(waypoints, zone, k_max))
     observations = [env.reset()]
     rl_programs = [env.program]
     rl_itr = 0 if env.errors.max_pos_mm <= POS_SPEC_MM else None

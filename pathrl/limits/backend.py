@@ -1,4 +1,4 @@
-"""Which code computes the joint limits: one explicit setting, :class:`LimitBackend` (issue 23).
+"""Which code computes the joint limits: one explicit setting, :class:`LimitBackend`.
 
 Two independent choices, each giving the torch reference's results to the tolerance below:
 

@@ -58,8 +58,8 @@ JOINT_STATE_SCHEMA = {"type": "object", "properties": {"episode": {"type": "inte
                       "position": {"type": "array"}, "velocity": {"type": "array"},
                       "acceleration": {"type": "array"}}}
 
-# ``industrial.mcap`` (one waypoint optimisation of issue 21: :mod:`pathrl.industrial.record`); positions in mm,
-# log time = iteration k seconds:
+# ``industrial.mcap`` (one waypoint optimisation of the motion-profile task: :mod:`pathrl.industrial.record`);
+# positions in mm, log time = iteration k seconds:
 #
 # * INDUSTRIAL_TARGET once: name, pose, move, speed_mm_s, method, policy, positions (n, 3), z_axis (n, 3);
 # * per iteration k (0 = the baseline profile): INDUSTRIAL_WAYPOINTS (iteration, positions (m, 3)),
@@ -75,7 +75,7 @@ INDUSTRIAL_SUMMARY = "/industrial/summary"
 #: the channels an industrial.mcap must have
 INDUSTRIAL_TOPICS = (INDUSTRIAL_TARGET, INDUSTRIAL_EXECUTED)
 
-# ``trueadapt.mcap`` (TrueAdapt adaptation episodes of issue 20: :mod:`pathrl.eval.trueadapt_record`), positions
+# ``trueadapt.mcap`` (TrueAdapt adaptation episodes: :mod:`pathrl.eval.trueadapt_record`), positions
 # in m and rad, log time = the episode's time on a back-to-back clock:
 #
 # * TRUEADAPT_ROBOT once: the EVAL_ROBOT layout plus mode, dt, plate_size (3,);

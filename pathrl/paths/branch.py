@@ -10,27 +10,54 @@ so both agree to rounding), solved with a batched tridiagonal sweep (a loop over
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
+import numpy as np
 import torch
 from torch import Tensor
 
 from pathrl.paths.spline import ARC_LENGTH_STEP
 
-__all__ = ["branch_knots", "dedupe_padded", "spline_eval", "spline_moments", "tabulate_batch"]
+__all__ = ["BranchShape", "BranchStart", "branch_knots", "dedupe_padded", "spline_eval", "spline_moments",
+           "tabulate_batch"]
 
 
-def branch_knots(knots: Tensor, knot_s: Tensor, end_knot: Tensor, s_now: Tensor, q_now: Tensor, v_now: Tensor,
-                 offset: Tensor, ramp: Tensor, pos_limits: Tensor, lead_s: float = 0.1,
-                 margin: float = 0.02) -> tuple[Tensor, Tensor]:
-    """The branch of B paths (:func:`pathrl.eval.path_change.branch` per row): from `q_now` (plus a knot at
-    q_now + lead_s v_now when that is more than 1e-6 rad away) along the path's knots past arc length
-    s_now + lead_s |v_now| up to `end_knot`, shifted by smoothstep((s - s_now) / ramp) `offset` and kept `margin`
-    inside `pos_limits`.
+@dataclass(frozen=True)
+class BranchStart:
+    """Where a branch starts: the robot at arc length `s` (rad) along its path, at joint positions `q` (rad), moving
+    at `v` (rad/s). One path (numpy): a float, (M,), (M,); B paths (torch): (B,), (B, M), (B, M)."""
 
-    knots (B, K, M), knot_s (B, K) their arc lengths (rad) along the path, end_knot (B,) long, s_now (B,),
-    q_now / v_now / offset (B, M) (rad, rad/s, rad), ramp (B,) rad, pos_limits (M, 2). Returns padded knots
-    (B, K + 2, M) and their count (B,) (1 + lead knot + kept knots; may be 1 when no knot is left).
+    s: float | Tensor
+    q: np.ndarray | Tensor
+    v: np.ndarray | Tensor
+
+
+@dataclass(frozen=True)
+class BranchShape:
+    """How a branch leaves its path: the remaining knots shifted by smoothstep((s - s_now) / `ramp`) `offset` (rad;
+    `ramp` in rad of arc length) and kept `margin` (rad) inside `pos_limits` (M, 2); a lead knot `lead_s` seconds of
+    the robot's motion ahead. One path (numpy): offset (M,), ramp a float; B paths (torch): (B, M), (B,)."""
+
+    offset: np.ndarray | Tensor
+    ramp: float | Tensor
+    pos_limits: np.ndarray | Tensor
+    lead_s: float = 0.1
+    margin: float = 0.02
+
+
+def branch_knots(knots: Tensor, knot_s: Tensor, end_knot: Tensor, start: BranchStart,
+                 shape: BranchShape) -> tuple[Tensor, Tensor]:
+    """The branch of B paths (:func:`pathrl.eval.path_change.branch` per row): from ``start.q`` (plus a knot at
+    q + lead_s v when that is more than 1e-6 rad away) along the path's knots past arc length s + lead_s |v| up to
+    `end_knot`, shifted and kept inside the position limits as `shape` says.
+
+    knots (B, K, M), knot_s (B, K) their arc lengths (rad) along the path, end_knot (B,) long; `start` and `shape`
+    of B paths (torch). Returns padded knots (B, K + 2, M) and their count (B,) (1 + lead knot + kept knots; may be
+    1 when no knot is left).
     """
+    s_now, q_now, v_now = start.s, start.q, start.v
+    offset, ramp, pos_limits = shape.offset, shape.ramp, shape.pos_limits
+    lead_s, margin = shape.lead_s, shape.margin
     b, k, _ = knots.shape
     lead = lead_s * v_now.norm(dim=1)
     has_lead = lead > 1e-6

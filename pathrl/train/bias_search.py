@@ -136,13 +136,13 @@ def search_before_training(cfg: dict[str, Any], actor: torch.nn.Module, knot_gap
     """Search the actor's output offsets on the training return before PPO (this module's search), on an
     env of its own (``bias_search.episodes`` envs, the run's training settings); records the search in the run's
     `summary` (its wall time counted as training time) and returns the updated summary."""
-    from pathrl.envs.registry import make_env
+    from pathrl.envs.registry import EnvRequest, make_env
     from pathrl.storage import write_json_atomic
 
     if cfg["agent"]["algorithm"]["class_name"] != "PPO" or cfg.get("residual"):
         raise ValueError("bias_search: only for a PPO run without residual (a trained actor's output offsets)")
     bs = BiasSearchCfg(**cfg["bias_search"])
-    search_env = make_env(cfg, "train", num_envs=bs.episodes, seed=bs.seed, knot_gap_norm=knot_gap)
+    search_env = make_env(cfg, EnvRequest(num_envs=bs.episodes, seed=bs.seed, knot_gap_norm=knot_gap))
     record = search_output_bias(search_env, actor, bs)
     print(f"bias_search: mean training return {record['mean_return_before']:.3f} -> {record['mean_return_after']:.3f} "
           f"in {record['evaluations']} evaluations ({record['wall_time_s']} s)", file=sys.stderr)

@@ -27,7 +27,7 @@ import yaml
 
 from pathrl.config.migrate import NO_TASK, migrate
 from pathrl.config.paths import CONF_DIR
-from pathrl.envs.registry import make_env
+from pathrl.envs.registry import EnvRequest, make_env
 from pathrl.envs.state import restore, snapshot, unwrapped
 from pathrl.limits.backend import LimitBackend
 from pathrl.storage import load_checkpoint
@@ -114,7 +114,7 @@ def walker_finds_misplaced(model: Path, dataset: Path, device: str = "cpu") -> d
 
     cfg, _ = model_cfg(model)
     backend = "analytic" if (cfg.get("task") or {}).get("feedback") == "ball_on_plate" else None
-    env = make_env(cfg, "train", num_envs=4, seed=0, dataset_path=str(dataset), backend=backend, device=device)
+    env = make_env(cfg, EnvRequest(num_envs=4, seed=0, dataset_path=str(dataset), backend=backend), device=device)
     before = off_device(env, device)
     env.pos = env.pos.to("meta")
     term = next(iter(env.ep_reward))
@@ -152,8 +152,8 @@ def step_parity(model: Path, dataset: Path, other: str, num_envs: int = 64, step
 
     cfg, ckpt = model_cfg(model)
     backend = "analytic" if (cfg.get("task") or {}).get("feedback") == "ball_on_plate" else None
-    envs = [make_env(cfg, "train", num_envs=num_envs, seed=0, dataset_path=str(dataset), backend=backend,
-                     **_eval_overrides(dev, dev == "cpu" and native_code))
+    request = EnvRequest(num_envs=num_envs, seed=0, dataset_path=str(dataset), backend=backend)
+    envs = [make_env(cfg, request, **_eval_overrides(dev, dev == "cpu" and native_code))
             for dev, native_code in (("cpu", True), (other, False))]
     ref, oth = envs
     restore(unwrapped(oth), _without_generators(snapshot(unwrapped(ref))))
@@ -195,7 +195,7 @@ def train_resume_evaluate(model: Path, dataset: Path, device: str, work: Path, n
     (``b``); the largest difference of their final weights (0 on the CPU: a resume is exact there), the tensors of
     the resumed run not on `device` (none expected), and `episodes` evaluation episodes of ``b`` on the evaluation
     device (its config says `device`)."""
-    from pathrl.eval.evaluate import evaluate
+    from pathrl.eval.evaluate import EvalOptions, evaluate
     from pathrl.train.placement import stray_tensors
     from pathrl.train.runner import train
 
@@ -212,8 +212,9 @@ def train_resume_evaluate(model: Path, dataset: Path, device: str, work: Path, n
     weight_diff = max(float((wa[k] - wb[k]).abs().max()) for k in wa)
     threads = torch.get_num_threads()
     try:
-        metrics = evaluate(work / "b", dataset_path=str(dataset), episodes=episodes, segments="full",
-                           out_dir=work / "eval", num_envs=episodes, record=False, progress=False, backend="analytic")
+        opts = EvalOptions(dataset_path=str(dataset), episodes=episodes, segments="full", out_dir=work / "eval",
+                           num_envs=episodes, record=False, progress=False, backend="analytic")
+        metrics = evaluate(work / "b", opts)
     finally:
         torch.set_num_threads(threads)  # evaluate() sets its own (PATHRL_THREADS)
     saved_device = yaml.safe_load((work / "b" / "config.yaml").read_text())["device"]
@@ -247,7 +248,7 @@ def env_steps_per_s(cfg: dict[str, Any], num_envs: int, seconds: float = 3.0, wa
     from pathrl import native
 
     device = torch.device(cfg["device"])
-    env = make_env(cfg, "train", num_envs=num_envs, seed=0)
+    env = make_env(cfg, EnvRequest(num_envs=num_envs, seed=0))
     gen = torch.Generator(device=device).manual_seed(0)
     actions = [torch.rand(num_envs, env.num_actions, generator=gen, device=device) * 2 - 1 for _ in range(8)]
     for k in range(warmup):
@@ -275,7 +276,7 @@ def ppo_iteration(cfg: dict[str, Any], num_envs: int, hidden_dtype: str, iterati
     agent = copy.deepcopy(cfg["agent"])
     for role in ("actor", "critic"):
         agent[role]["hidden_dtype"] = hidden_dtype
-    env = make_env(cfg, "train", num_envs=num_envs, seed=0)
+    env = make_env(cfg, EnvRequest(num_envs=num_envs, seed=0))
     with contextlib.redirect_stdout(io.StringIO()):
         runner = OnPolicyRunner(env, agent, log_dir=None, device=device)
         runner.learn(1)

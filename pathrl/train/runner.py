@@ -302,7 +302,7 @@ def _train(cfg: dict[str, Any], run_dir: Path, resume: bool,
               "nothing to do, nothing changed", file=sys.stderr)
         return finished
     with LimitBackend(native=LimitBackend.from_run(cfg).native).active():  # the run's native choice, kernels eager
-        env = make_env(cfg, "train")  # bad values and data fail here, before anything is written into run_dir
+        env = make_env(cfg)  # bad values and data fail here, before anything is written into run_dir
     start_notes(cfg)
     env = with_path_changes(cfg, env)  # path_change group (pathrl.envs.path_changes); absent or off: env itself
     distill = cfg["agent"]["algorithm"]["class_name"] == "Distillation"

@@ -1,4 +1,4 @@
-"""Rerun recordings (``.rrd``) of one industrial waypoint optimisation (``industrial.mcap``, issue 21).
+"""Rerun recordings (``.rrd``) of one industrial waypoint optimisation (``industrial.mcap``).
 
 Reads the file :mod:`pathrl.industrial.record` writes (topics: :mod:`pathrl.logging.schema`, ``INDUSTRIAL_*``).
 Positions are shown in metres (the file's mm / 1000), in the robot base frame (z up). Timeline ``iteration``

@@ -1,4 +1,4 @@
-"""Rerun recordings (``.rrd``) of TrueAdapt adaptation episodes (``trueadapt.mcap``, issue 20).
+"""Rerun recordings (``.rrd``) of TrueAdapt adaptation episodes (``trueadapt.mcap``).
 
 Reads the file :mod:`pathrl.eval.trueadapt_record` writes (topics: :mod:`pathrl.logging.schema`, ``TRUEADAPT_*``).
 Timelines as in the episodes recording (:mod:`pathrl.viz.episodes`): ``time`` (s, the episodes back to back with

@@ -28,7 +28,7 @@ import numpy as np
 import torch
 
 from pathrl.dataset.io import load_pathset
-from pathrl.envs.registry import EVAL_ENV, make_env
+from pathrl.envs.registry import EVAL_ENV, EnvRequest, make_env
 from pathrl.eval.rollout import rollout
 from pathrl.paths.knots import KnotStrategy
 from pathrl.paths.segments import evaluation_plan
@@ -63,8 +63,9 @@ def run_backend(run_dir: str, dataset: str, episodes: int, seed: int, backend: s
     readings after each step (T + 1, 8), steps, fall step (or None) and the commanded setpoints."""
     cfg, ckpt, summary, robot, paths = _setup(run_dir, dataset)
     plan = evaluation_plan(paths, episodes, "paper", seed)
-    env = make_env(cfg, "test", num_envs=episodes, seed=seed, knot_gap_norm=summary["knot_gap_norm"], paths=paths,
-                   robot=robot, backend=backend, **EVAL_ENV)
+    request = EnvRequest("test", num_envs=episodes, seed=seed, knot_gap_norm=summary["knot_gap_norm"], paths=paths,
+                         robot=robot, backend=backend)
+    env = make_env(cfg, request, **EVAL_ENV)
     try:
         policy = make_controller(cfg["controller"], env) if "controller" in cfg else load_policy(cfg, env, ckpt)
         rec = Recorder(env, policy)
@@ -161,8 +162,9 @@ def open_loop_gap(pb: dict, robot, control_rate: float = 240.0) -> dict:
 def speed(run_dir: str, dataset: str, backend: str, num_envs: int, seconds: float) -> float:
     """Env steps per second of the run's training env (auto-reset, random actions) with `backend`."""
     cfg, _, summary, robot, paths = _setup(run_dir, dataset)
-    env = make_env(cfg, "test", num_envs=num_envs, seed=0, knot_gap_norm=summary["knot_gap_norm"], paths=paths,
-                   robot=robot, backend=backend)
+    request = EnvRequest("test", num_envs=num_envs, seed=0, knot_gap_norm=summary["knot_gap_norm"], paths=paths,
+                         robot=robot, backend=backend)
+    env = make_env(cfg, request)
     gen = torch.Generator().manual_seed(0)
     try:
         env.reset()
