@@ -1,6 +1,6 @@
 """Time-to-quality curves: evaluate a run's checkpoints on its test split and find when it met the paper's row.
 
-    python tools/time_to_quality.py --run runs/iiwa7_random/seed0 --row iiwa7/random [--run OTHER --label ...]
+    python tools/lab/time_to_quality.py --run runs/iiwa7_random/seed0 --row iiwa7/random [--run OTHER --label ...]
 
 Each run's checkpoints (every ``--every`` iterations and the last) are evaluated with the paper's protocol
 (deterministic policy, 1200 test segments of ``datasets/<robot>/<dataset>``, the committed split; whole paths with
@@ -24,7 +24,7 @@ from pathrl.eval.curve import Target, curve_record, evaluate_curve, first_reachi
 from pathrl.repro.tables import PATH_ROBOT, TABLE_I
 from pathrl.storage import write_json_atomic
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def paper_target(row: str, dev_factor: float) -> Target:
