@@ -1,4 +1,4 @@
-"""The shell commands and links of README.md and docs/*.md, checked against the project (issue 23).
+"""The shell commands and links of README.md, docs/*.md and docs/lab/*.md, checked against the project (issue 23).
 
 Every ```bash block is split into commands (backslash continuations joined, ``#`` comments dropped). Each command
 must name what exists, checked without running anything long:
@@ -50,7 +50,8 @@ class _Parsed(Exception):
 
 
 def doc_files() -> list[Path]:
-    return [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+    """README.md, the user pages docs/*.md and the lab notes docs/lab/*.md."""
+    return [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md")), *sorted((ROOT / "docs" / "lab").glob("*.md"))]
 
 
 def commands_in(text: str, name: str) -> list[Command]:

@@ -104,3 +104,17 @@ def test_installed_copy_reads_the_table_rows(installed, tmp_path):
                           "--package", "hydra.sweeper"], capture_output=True, text=True, cwd=tmp_path, env=env,
                          timeout=120)
     assert out.returncode == 0 and "iiwa7_random_length_lt_deviation" in out.stdout, out.stderr[-3000:]
+
+
+def test_installed_copy_reads_the_papers_values(installed, tmp_path):
+    """The papers' published values (pathrl/config/paper/*.yaml) are package data: read from the installed copy."""
+    env = dict(os.environ, PYTHONPATH=str(installed), OMP_NUM_THREADS="1")
+    code = ("from pathrl.config import paper; print(paper.DIR); "
+            "print(*(len(paper.load(n).tables) for n in paper.PAPERS)); "
+            "from pathrl.industrial.timing import PAPER_EXECUTION_S; print(PAPER_EXECUTION_S)")
+    r = subprocess.run([PY, "-c", code], capture_output=True, text=True, cwd=tmp_path, env=env, timeout=120)
+    assert r.returncode == 0, r.stderr[-3000:]
+    from pathrl.config import paper  # the checkout's, for comparison
+
+    tables = " ".join(str(len(paper.load(n).tables)) for n in paper.PAPERS)
+    assert r.stdout.splitlines() == [str(installed / "pathrl" / "config" / "paper"), tables, "12.0"]

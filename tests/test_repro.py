@@ -13,6 +13,7 @@ from pathlib import Path
 import pytest
 import yaml
 
+from pathrl.config.paper import load as load_paper
 from pathrl.repro.figures import pareto_table_ii
 from pathrl.repro.render import render_latex, render_markdown
 from pathrl.repro.tables import (
@@ -31,7 +32,7 @@ from pathrl.repro.tables import (
 
 ROOT = Path(__file__).resolve().parents[1]
 GOLDEN = Path(__file__).parent / "golden"
-PAPER = yaml.safe_load((ROOT / "tools" / "paper_tables.yaml").read_text())
+PAPER = load_paper("tracking").as_dict()
 METRICS = ["duration_s", "joint_dev_mean_rad", "joint_dev_max_rad", "joint_dev_final_rad", "cart_pos_dev_mean_cm",
            "cart_pos_dev_max_cm", "cart_pos_dev_final_cm", "cart_rot_dev_mean_deg", "cart_rot_dev_max_deg",
            "cart_rot_dev_final_deg"]

@@ -120,7 +120,7 @@ def test_rigid_bodies_keep_mass_centre_of_mass_and_inertia(robot):
 
 def test_the_soles_are_the_ones_pybullet_stands_on(robot):
     """ARMAR-4's soles: heel at x = -0.051 m, toe at 0.135 m, inner and outer edges at |y| = 0.028 and 0.124 m: the
-    contact points PyBullet reports for the robot at rest (docs/armar4_balance.md)."""
+    contact points PyBullet reports for the robot at rest (docs/lab/armar4_balance.md)."""
     model = AnalyticStanding(robot, 1)
     model.reset(torch.arange(1), _posture(robot)[None])
     sole = model.sole[0].numpy()

@@ -86,7 +86,7 @@ def test_train_resume_and_eval(tiny_dataset, tmp_path):
 
     # time-to-quality curve over the checkpoints of iterations 0, 2 (every 2) and the last one (3)
     curve = tmp_path / "curve"
-    r = run([sys.executable, "tools/time_to_quality.py", "--run", str(run_dir), "--row", "iiwa7/random",
+    r = run([sys.executable, "tools/lab/time_to_quality.py", "--run", str(run_dir), "--row", "iiwa7/random",
              "--dataset", str(tiny_dataset), "--every", "2", "--episodes", "3", "--out", str(curve)])
     assert r.returncode == 0, r.stderr[-2000:]
     rec = json.loads((curve / "curve.json").read_text())["runs"][0]
@@ -96,14 +96,14 @@ def test_train_resume_and_eval(tiny_dataset, tmp_path):
     assert all(w > 0 for w in walls) and walls == sorted(walls)
     assert rec["target"] == {"max_duration_s": 4.28, "max_dev_cm": 3.3} and (curve / "curve.png").is_file()
     # whole paths (the ball-balancing row's protocol): one episode per test path
-    r = run([sys.executable, "tools/time_to_quality.py", "--run", str(run_dir), "--dataset", str(tiny_dataset),
+    r = run([sys.executable, "tools/lab/time_to_quality.py", "--run", str(run_dir), "--dataset", str(tiny_dataset),
              "--every", "4", "--segments", "full", "--out", str(tmp_path / "curve_full")])
     assert r.returncode == 0, r.stderr[-2000:]
     rec = json.loads((tmp_path / "curve_full" / "curve.json").read_text())["runs"][0]
     assert rec["segments"] == "full" and [p["iteration"] for p in rec["points"]] == [1, 4]
     full = [json.loads(f.read_text()) for f in (tmp_path / "curve_full").glob("*/model_*/metrics.json")]
     assert len(full) == 2 and all(m["segments"] == "full" and m["episodes"] == len(m["per_episode"]) for m in full)
-    r = run([sys.executable, "tools/time_to_quality.py", "--run", str(run_dir), "--row", "iiwa7/nowhere",
+    r = run([sys.executable, "tools/lab/time_to_quality.py", "--run", str(run_dir), "--row", "iiwa7/nowhere",
              "--out", str(curve)])
     assert r.returncode == 2 and "not a Table I row" in r.stderr
 

@@ -1,4 +1,4 @@
-"""The new-robot students' table (tools/your_robot_table.py): hand-checked cells from made-up files, and the
+"""The new-robot students' table (tools/lab/your_robot_table.py): hand-checked cells from made-up files, and the
 committed table is what the committed results give."""
 
 from __future__ import annotations
@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "tools"))
+sys.path.insert(0, str(ROOT / "tools" / "lab"))
 
 import your_robot_table as table  # noqa: E402
 

@@ -41,6 +41,7 @@ import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+from pathrl.config.paper import load as load_paper  # noqa: E402
 from pathrl.repro.sweeps import SweepsError  # noqa: E402
 
 try:  # the rows are read from sweeps/<table>.yaml at import: a broken file is its one-line error
@@ -69,7 +70,8 @@ from pathrl.storage import atomic_write  # noqa: E402
 from pathrl.train.ship import read_curve  # noqa: E402
 
 BIN = Path(sys.executable).parent
-PAPER = yaml.safe_load((ROOT / "tools" / "paper_tables.yaml").read_text())
+#: The paper's tables (pathrl/config/paper/tracking.yaml), as the renderers take them.
+PAPER = load_paper("tracking").as_dict()
 #: Evaluations whose episodes are drawn as example path overlays (one per robot).
 OVERLAYS = {"iiwa7_random_track_distill": "KUKA iiwa 7, random path",
             "armar6_random_track_distill": "ARMAR-6, random path", "armar4_random": "ARMAR-4 (fixed base), random path"}

@@ -1,7 +1,7 @@
 """Leg balance for the free-standing ARMAR-4, composed with a policy that moves the upper body.
 
 The upper body (the path joints) follows a shipped policy network; the leg joints (the free joints) follow a
-corrected standing posture q* (docs/armar4_balance.md):
+corrected standing posture q* (docs/lab/armar4_balance.md):
 
     COM       static centre of mass of the commanded posture (ankles at 0) relative to the ankles (x forward,
               z up; :class:`pathrl.baselines.com.StaticCom`): the ankles lean the body forward by
@@ -58,7 +58,7 @@ class BalanceCfg:
     omega: float = 3.0  # natural frequency of the legs following their corrected posture (rad/s)
     max_correction: float = 0.3  # |corrected posture| of a leg joint (rad)
     policy_legs: float = 0.0  # weight of the policy's own leg actions added to the balance law's (0: replaced)
-    # dynamic terms (docs/armar4_balance.md, section 5); all off by default, which is the static law above
+    # dynamic terms (docs/lab/armar4_balance.md, section 5); all off by default, which is the static law above
     k_zmp: float = 0.0  # share of the upper body's dynamic ZMP shift (next step) added to the static COM error
     preview: float = 0.0  # s: the static COM of the upper body's posture this far ahead (q + v preview)
     zmp_min: float = -math.inf  # m: lowest ZMP (relative to the ankles) the legs let the next step command

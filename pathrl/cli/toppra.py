@@ -18,12 +18,13 @@ from pathlib import Path
 from typing import Any
 
 from pathrl.cli.common import UserError, compose, output_file, run_cli, to_container
+from pathrl.config.paper import load as load_paper
 from pathrl.storage import write_json_atomic
 
 __all__ = ["PAPER_EPISODES", "main", "main_", "print_summary", "summarize"]
 
-#: Default number of episodes of ``segments=paper`` (cycling over the paths).
-PAPER_EPISODES = 1200
+#: Default number of episodes of ``segments=paper`` (cycling over the paths): the paper's evaluation protocol.
+PAPER_EPISODES = int(load_paper("tracking").value("episodes"))
 
 
 def _num(x: float) -> float | None:

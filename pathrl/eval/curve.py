@@ -12,10 +12,14 @@ import json
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
+from pathrl.config.paper import load as load_paper
 from pathrl.storage import atomic_write, checkpoint_iteration, load_checkpoint, run_checkpoints
 
-__all__ = ["CurvePoint", "Target", "checkpoint_wall_time", "checkpoints", "curve_record", "evaluate_curve",
-           "first_reaching", "plot_curves"]
+__all__ = ["CurvePoint", "PAPER_EPISODES", "Target", "checkpoint_wall_time", "checkpoints", "curve_record",
+           "evaluate_curve", "first_reaching", "plot_curves"]
+
+#: Test segments per evaluation with ``segments=paper``: the paper's protocol.
+PAPER_EPISODES = int(load_paper("tracking").value("episodes"))
 
 
 @dataclass(frozen=True)
@@ -60,7 +64,8 @@ def checkpoint_wall_time(path: Path) -> float | None:
     return None if t is None else float(t)
 
 
-def evaluate_curve(run_dir: Path, dataset: str, out_dir: Path, every: int = 50, episodes: int | None = 1200,
+def evaluate_curve(run_dir: Path, dataset: str, out_dir: Path, every: int = 50,
+                   episodes: int | None = PAPER_EPISODES,
                    progress: bool = True, segments: str = "paper") -> list[CurvePoint]:
     """Evaluate every selected checkpoint of `run_dir` on the test split of `dataset` (`segments`: the paper's
     random segments, or ``full`` paths; `episodes` None: one per path with ``full``).

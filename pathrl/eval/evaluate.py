@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from pathrl.config.paper import load as load_paper
 from pathrl.dataset.io import load_pathset
 from pathrl.envs.registry import EVAL_ENV, EnvRequest, make_env, task_cfg
 from pathrl.envs.terminations import TerminationReason
@@ -120,7 +121,7 @@ def evaluate(run_dir: Path, opts: EvalOptions = EvalOptions()) -> dict[str, Any]
     paths = load_pathset(ds_path, opts.split, knots, robot=robot, out_of_limits=opts.out_of_limits)
     episodes = opts.episodes
     if episodes is None:
-        episodes = paths.num_paths if opts.segments == "full" else 1200
+        episodes = paths.num_paths if opts.segments == "full" else int(load_paper("tracking").value("episodes"))
     plan = evaluation_plan(paths, episodes, opts.segments, opts.seed)
     if gap is None:  # a controller's directory without a summary: D of its training split, as in training
         gap = load_pathset(cfg["dataset"]["path"], "train", knots, robot=robot).max_knot_gap()

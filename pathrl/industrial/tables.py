@@ -1,62 +1,41 @@
 """Markdown tables laid out like the paper's Table II (IWA: baseline and MPGD) and Table III (speed search),
 with the paper's values beside ours.
 
-The paper's values are from Wen et al., Tables II and III (RobotStudio simulation of an ABB IRB 6640; Table II
-also lists the real robot's baseline error). They come from a different controller, so they are context, not
-a target: our controller is :mod:`pathrl.industrial.controller`. ``None`` is the paper's "N/A" (the 0.5 mm spec
-was not reached within k_max).
+The paper's values are from Wen et al., Tables II-IV (RobotStudio simulation of an ABB IRB 6640; Table II also
+lists the real robot's baseline error), read from ``pathrl/config/paper/industrial.yaml`` (:mod:`pathrl.config.paper`).
+They come from a different controller, so they are context, not a target: our controller is
+:mod:`pathrl.industrial.controller`. ``None`` is the paper's "N/A" (the 0.5 mm spec was not reached within k_max).
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+
+from pathrl.config.paper import load as load_paper
 
 __all__ = [
     "PAPER_RL", "PAPER_TABLE2", "PAPER_TABLE3", "PAPER_TABLE4", "Table2Row", "Table3Row", "ratios", "table2_markdown",
     "table3_markdown", "table4_markdown",
 ]
 
+_PAPER = load_paper("industrial")
+_T2 = _PAPER.table("table_II")
 #: Paper Table II per row: speed command (sim), baseline error sim / real (mm), MPGD (sim) error (mm),
 #: iterations, t_opt (s).
 PAPER_TABLE2: dict[str, tuple[float, float, float, float, int | None, float | None]] = {
-    "Type 1 Hard": (250, 1.55, 1.92, 1.07, None, None),
-    "Type 1 Easy": (250, 0.80, 1.02, 0.20, 3, 95.45),
-    "Type 1 Medium": (250, 1.79, 2.06, 0.43, 5, 333.38),
-    "Type 1 (pose 1)": (250, 1.63, 2.07, 0.20, 3, 153.71),
-    "Type 1 (pose 2)": (400, 4.60, 4.28, 0.66, None, None),
-    "Type 1 (pose 3)": (400, 2.03, 3.66, 0.31, 8, 383.67),
-    "Type 2 (pose 1)": (1100, 1.74, 1.31, 0.21, 14, 642.66),
-    "Type 2 (pose 4)": (1100, 1.71, 1.24, 0.51, None, None),
-    "Type 2 (MoveJ)": (1100, 1.59, 1.22, 0.22, 11, 156.00),
-}
-
+    k: v[:6] for k, v in _T2.rows.items()}
 #: Paper Table II RL (sim) per row: error (mm), iterations, t_opt (s).
-PAPER_RL: dict[str, tuple[float, int | None, float | None]] = {
-    "Type 1 Hard": (1.14, None, None),
-    "Type 1 Easy": (0.23, 1, 9.61),
-    "Type 1 Medium": (0.45, 2, 22.73),
-    "Type 1 (pose 1)": (0.13, 1, 10.74),
-    "Type 1 (pose 2)": (0.46, 7, 63.46),
-    "Type 1 (pose 3)": (0.23, 2, 17.42),
-    "Type 2 (pose 1)": (0.22, 2, 17.68),
-    "Type 2 (pose 4)": (0.22, 2, 17.30),
-    "Type 2 (MoveJ)": (0.23, 2, 17.57),
-}
-
+PAPER_RL: dict[str, tuple[float, int | None, float | None]] = {k: v[6:] for k, v in _T2.rows.items()}
 #: Paper Table III per row (RL inner loop): IWA + bisection error (mm), mean speed (mm/s), speed std (%).
-PAPER_TABLE3: dict[str, tuple[float, float, float]] = {
-    "Type 1 Hard": (0.49, 91.13, 3.0),
-    "Type 1 Easy": (0.31, 408.78, 4.8),
-    "Type 1 Medium": (0.48, 133.25, 4.5),
-    "Type 1 (pose 1)": (0.11, 258.89, 4.9),
-    "Type 1 (pose 2)": (0.48, 223.37, 0.9),
-    "Type 1 (pose 3)": (0.44, 410.02, 3.4),
-    "Type 2 (pose 1)": (0.19, 991.25, 4.8),
-    "Type 2 (pose 4)": (0.47, 1085.25, 3.4),
-    "Type 2 (MoveJ)": (0.49, 998.18, 4.9),
-}
+PAPER_TABLE3: dict[str, tuple[float, float, float]] = dict(_PAPER.table("table_III").rows)
+
+
+def _paper_reached(itrs: Sequence[int | None]) -> str:
+    """'6/9, mean 7.3 iterations': the paper's rows at 0.5 mm and their mean iterations."""
+    done = [i for i in itrs if i is not None]
+    return f"{len(done)}/{len(itrs)}, mean {sum(done) / len(done):.1f} iterations"
 
 
 @dataclass(frozen=True)
@@ -113,7 +92,7 @@ def _ratio(rows: Sequence[Table2Row]) -> str:
     if rat is None:
         return "no row reached 0.5 mm with both methods"
     return (f"On the {rat[0]} rows both reach 0.5 mm: MPGD / policy iterations = {rat[1]:.1f}x, t_opt = "
-            f"{rat[2]:.1f}x (paper: 4.2x and 17.7x)")
+            f"{rat[2]:.1f}x (paper: {_PAPER.value('rl_itr_improvement')}x and {_PAPER.value('rl_t_opt_speedup')}x)")
 
 
 def table2_markdown(rows: Sequence[Table2Row], command: str, note: str = "", policy_name: str = "RL") -> str:
@@ -138,12 +117,13 @@ def table2_markdown(rows: Sequence[Table2Row], command: str, note: str = "", pol
     itrs = [r.mpgd_itr for r in rows if r.mpgd_itr is not None]
     summary = [f"MPGD reached 0.5 mm on {reached}/{len(rows)} trajectories"
                + (f", mean {sum(itrs) / len(itrs):.1f} iterations" if itrs else "")
-               + "; the paper's MPGD (RobotStudio): 6/9, mean 7.3 iterations."]
+               + f"; the paper's MPGD (RobotStudio): {_paper_reached([p[4] for p in PAPER_TABLE2.values()])}."]
     if has_rl:
         rl_itrs = [r.rl_itr for r in rows if r.rl_itr is not None]
         summary.append(f"{policy_name} reached 0.5 mm on {len(rl_itrs)}/{len(rows)}"
                        + (f", mean {sum(rl_itrs) / len(rl_itrs):.1f} iterations" if rl_itrs else "")
-                       + "; the paper's RL: 8/9, mean 2.4 iterations. " + _ratio(rows) + ".")
+                       + f"; the paper's RL: {_paper_reached([q[1] for q in PAPER_RL.values()])}. " + _ratio(rows)
+                       + ".")
     title = "# Industrial motion-profile optimisation: Table II (Baseline, MPGD" + (
         f", {policy_name})" if has_rl else ")")
     text = [title, "",
@@ -169,24 +149,17 @@ def table3_markdown(rows: Sequence[Table3Row], command: str, note: str = "", iwa
     return "\n".join(text)
 
 
+def _by_variant(rows: Mapping[str, tuple]) -> dict[str, dict[str, tuple]]:
+    """Rows keyed "<variant>/<trajectory>" as {variant: {trajectory: cells}}, in file order."""
+    out: dict[str, dict[str, tuple]] = {}
+    for key, cells in rows.items():
+        variant, _, name = key.partition("/")
+        out.setdefault(variant, {})[name] = cells
+    return out
+
+
 #: Paper Table IV (RobotStudio) per row and variant: error (mm), iterations (None = N/A).
-PAPER_TABLE4: dict[str, dict[str, tuple[float, int | None]]] = {
-    "RL": {"Type 1 Hard": (1.14, None), "Type 1 Easy": (0.23, 1), "Type 1 Medium": (0.45, 2),
-           "Type 1 (pose 1)": (0.13, 1), "Type 1 (pose 2)": (0.46, 7), "Type 1 (pose 3)": (0.23, 2),
-           "Type 2 (pose 1)": (0.24, 2), "Type 2 (pose 4)": (0.22, 2), "Type 2 (MoveJ)": (0.23, 2)},
-    "RL-PER": {"Type 1 Hard": (1.09, None), "Type 1 Easy": (0.17, 1), "Type 1 Medium": (0.43, 2),
-               "Type 1 (pose 1)": (0.23, 1), "Type 1 (pose 2)": (0.96, None), "Type 1 (pose 3)": (0.31, 4),
-               "Type 2 (pose 1)": (0.24, 2), "Type 2 (pose 4)": (0.44, 6), "Type 2 (MoveJ)": (0.18, 2)},
-    "RL-P_target": {"Type 1 Hard": (1.18, None), "Type 1 Easy": (0.23, 1), "Type 1 Medium": (0.45, 2),
-                    "Type 1 (pose 1)": (0.21, 2), "Type 1 (pose 2)": (1.39, None), "Type 1 (pose 3)": (0.24, 7),
-                    "Type 2 (pose 1)": (0.18, 2), "Type 2 (pose 4)": (0.47, 5), "Type 2 (MoveJ)": (0.20, 1)},
-    "RL-q-F_jac": {"Type 1 Hard": (1.30, None), "Type 1 Easy": (0.25, 1), "Type 1 Medium": (0.42, 2),
-                   "Type 1 (pose 1)": (0.24, 2), "Type 1 (pose 2)": (2.00, None), "Type 1 (pose 3)": (0.22, 4),
-                   "Type 2 (pose 1)": (0.17, 2), "Type 2 (pose 4)": (0.53, None), "Type 2 (MoveJ)": (0.15, 2)},
-    "RL-e": {"Type 1 Hard": (1.33, None), "Type 1 Easy": (0.24, 1), "Type 1 Medium": (0.47, 3),
-             "Type 1 (pose 1)": (0.20, 2), "Type 1 (pose 2)": (1.56, None), "Type 1 (pose 3)": (0.20, 3),
-             "Type 2 (pose 1)": (0.23, 3), "Type 2 (pose 4)": (0.54, None), "Type 2 (MoveJ)": (0.19, 2)},
-}
+PAPER_TABLE4: dict[str, dict[str, tuple[float, int | None]]] = _by_variant(_PAPER.table("table_IV").rows)
 
 
 def table4_markdown(results: dict[str, list[tuple[str, float, int | None]]], command: str, note: str = "") -> str:

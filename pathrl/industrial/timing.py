@@ -18,6 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from pathrl.config.paper import load as load_paper
 from pathrl.industrial import arm
 from pathrl.industrial.controller import ControllerParams, Execution, execute
 from pathrl.industrial.features import features, match
@@ -34,10 +35,10 @@ __all__ = [
 ]
 
 #: The paper's costs (s): one RobotStudio execution (Sec. III-B, "about 12 seconds"), MPGD's and the policy's
-#: choice of actions per iteration (Sec. IV-C).
-PAPER_EXECUTION_S = 12.0
-PAPER_MPGD_DECISION_S = 60.86
-PAPER_POLICY_DECISION_S = 0.004
+#: choice of actions per iteration (Sec. IV-C); ``pathrl/config/paper/industrial.yaml``.
+PAPER_EXECUTION_S = float(load_paper("industrial").value("execution_s"))
+PAPER_MPGD_DECISION_S = float(load_paper("industrial").value("mpgd_decision_s"))
+PAPER_POLICY_DECISION_S = float(load_paper("industrial").value("policy_decision_s"))
 
 
 @dataclass

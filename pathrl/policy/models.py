@@ -8,7 +8,7 @@ gradients, the optimizer state, the output layer, the action distribution and ev
 The model is the same function in rollouts, updates and evaluation, so PPO's probability ratio starts at
 exactly 1 and nothing is biased by the rounding.
 
-Measured (docs/training_speed.md, iiwa7 random, 2 seeds each): 1.7x the samples/s of float32 and the paper's
+Measured (docs/lab/training_speed.md, iiwa7 random, 2 seeds each): 1.7x the samples/s of float32 and the paper's
 quality in 5-7 instead of 13-21 min, but after 600 iterations 3.97-3.98 s against float32's 3.73-3.83 s at
 the same deviation: late in training, with the action noise annealed, float32 learns more per sample.
 ``hidden_dtype="float32"`` is exactly the stock model. Keeping the first layer in float32 (the observation

@@ -2,7 +2,7 @@
 
 Pure functions of ``results`` = ``{"evaluations": {evaluation_id: metrics.json}, "baselines":
 {baseline_id: toppra.json}, "realtime": {key: realtime.json}, "training": {model: summary.json}}`` and the
-paper's tables (``paper_tables.yaml``), so the output is fixed by its inputs (tests/golden/tables.md).
+paper's tables (``pathrl/config/paper/tracking.yaml``), so the output is fixed by its inputs (tests/golden/tables.md).
 """
 
 from __future__ import annotations

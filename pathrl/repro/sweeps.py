@@ -41,7 +41,7 @@ class RowSpec:
     """One row of a table: its key, the evaluation that fills it, and whether the paper lacks it or it is a model-based
     controller."""
 
-    key: str  # row key in the table (paper_tables.yaml)
+    key: str  # row key in the paper's table (pathrl/config/paper/tracking.yaml)
     evaluation: Any  # an instance of the evaluation class given to load_table (pathrl.repro.tables.Evaluation)
     not_in_paper: bool = False  # the paper has no such row (shown with a dash for its value)
     controller: bool = False  # models/<model> holds a model-based controller: evaluated, never trained

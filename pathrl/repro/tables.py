@@ -102,9 +102,9 @@ def _knot_positions(knots: str) -> str:
 
 @dataclass(frozen=True)
 class Row:
-    """A table row: the table and row key in ``paper_tables.yaml`` and the evaluation that fills it."""
+    """A table row: the table and row key in ``pathrl/config/paper/tracking.yaml`` and the evaluation that fills it."""
 
-    table: str  # key in paper_tables.yaml
+    table: str  # key in pathrl/config/paper/tracking.yaml
     key: str  # row key in that table
     evaluation: Evaluation
 

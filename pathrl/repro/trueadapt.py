@@ -5,7 +5,7 @@ a model-based controller) fills our cells, on which split and ball. An evaluatio
 and writes ``results/raw/<id>/metrics.json``; the 10^5-trajectory limit validation (Sec. VI-D) runs
 ``tools/trueadapt_validation.py`` into ``results/raw/trueadapt_validation.json``; the time per decision
 (``pathrl.eval.trueadapt_realtime``) goes into ``results/raw/trueadapt_realtime.json``. The paper's values are
-``trueadapt_paper.yaml`` next to this file. Rendering is a pure function of those results.
+``pathrl/config/paper/trueadapt.yaml`` (:mod:`pathrl.config.paper`). Rendering is a pure function of those results.
 """
 
 from __future__ import annotations
@@ -17,8 +17,7 @@ from functools import cache
 from pathlib import Path
 from typing import Any
 
-import yaml
-
+from pathrl.config.paper import load as load_paper
 from pathrl.repro.tables import training_record
 
 __all__ = [
@@ -28,7 +27,6 @@ __all__ = [
 ]
 
 ADAPT_TABLE = "trueadapt_table_I"
-PAPER_FILE = Path(__file__).with_name("trueadapt_paper.yaml")
 ROBOT = "iiwa7"
 #: Our metric columns (the paper's Table I), and the raw result's key and scale for each.
 COLUMNS = ("success_pct", "fraction_pct", "error_distance_cm", "acc_pct", "jerk_pct")
@@ -81,7 +79,7 @@ class AdaptRow:
     """A row of the TrueAdapt table: key, the paper's setting, what fills our cells and its evaluation (None: nothing
     shipped, a dash)."""
 
-    key: str  # row key in trueadapt_paper.yaml (or ours)
+    key: str  # row key in the paper's table (pathrl/config/paper/trueadapt.yaml), or ours
     setting: str  # the paper's setting
     ours: str  # what fills our cells
     evaluation: AdaptEval | None = None  # None: nothing shipped for it (a dash)
@@ -200,8 +198,8 @@ def names() -> set[str]:
 
 @cache
 def paper() -> dict[str, Any]:
-    """The paper's Table I (``trueadapt_paper.yaml``): {"columns": [...], "rows": {key: [...]}}."""
-    return yaml.safe_load(PAPER_FILE.read_text())[ADAPT_TABLE]
+    """The paper's Table I (``pathrl/config/paper/trueadapt.yaml``): {"columns": [...], "rows": {key: [...]}}."""
+    return load_paper("trueadapt").table(ADAPT_TABLE).as_dict()
 
 
 def _rel(p: Path, root: Path) -> str:
@@ -331,12 +329,14 @@ def _validation_line(v: list[dict[str, Any]] | None) -> str:
 def _realtime_line(r: dict[str, Any] | None) -> str:
     if not r:
         return "Time per decision: not measured."
+    published = load_paper("trueadapt")
+    paper_ms, paper_cpu = published.value("valid_range_ms_max"), published.value("valid_range_cpu")
     return (f"Time per decision (`python -m pathrl.eval.trueadapt_realtime`; `{r['model']}`, one env, one thread, "
             f"CPU time of the policy, the clipping into the valid range, the setpoints, the valid range and the "
             f"observation of the next decision; {r['decisions']} decisions, limits {r['limits']}): "
             f"**{r['decision_ms_mean']:.2f} ms** mean, {r['decision_ms_max']:.2f} ms max "
             f"({r['max_pct_of_cycle']:.1f} % of the {r['cycle_ms']:.0f} ms cycle); the valid range alone at most "
-            f"**{r['valid_range_ms_max']:.2f} ms** (paper: at most 0.9 ms on an Intel i9-9900K).")
+            f"**{r['valid_range_ms_max']:.2f} ms** (paper: at most {paper_ms} ms on an {paper_cpu}).")
 
 
 CAPTION = (

@@ -35,7 +35,7 @@ links. All quantities float64, SI units (m, s, rad, kg), batch first.
 
 Neglected: the motors' compliance and force limits (but for the choice of stance foot), foot slip and turning
 about the floor normal, bounces, the Coriolis terms of the joint motion during a tip.
-Measured against PyBullet: tests/test_standing_model.py and tools/lab/standing_gap.py (docs/armar4_balance.md).
+Measured against PyBullet: tests/test_standing_model.py and tools/lab/standing_gap.py (docs/lab/armar4_balance.md).
 """
 
 from __future__ import annotations

@@ -4,7 +4,7 @@ Why: PPO explores with noise that is independent from step to step. A trained tr
 so it cancels a one-step push within a few steps. A constant offset that the policy holds from the path is
 therefore almost invisible to PPO's gradient, even when the reward pays for removing it. Under the KL-adaptive step
 the mean also moves only about sigma * sqrt(2 KL) per iteration. ARMAR-4 random is the measured case
-(docs/lab_notebook.md): a constant +0.6 on two action outputs removes 0.06 rad offsets and 2 cm of hand deviation.
+(docs/lab/lab_notebook.md): a constant +0.6 on two action outputs removes 0.06 rad offsets and 2 cm of hand deviation.
 
 The search changes only the bias of the actor's output layer (one number per joint, D in all). Its objective is the
 run's own training return:

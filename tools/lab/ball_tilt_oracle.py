@@ -11,7 +11,7 @@ u = t / T, 240 Hz setpoints; joint limits are not checked), then held for 2 s, i
   finite differences), repeated `--iters` times.
 
 Prints the share of balls lost and the joint / TCP deviation of the correction. Usage:
-    .venv/bin/python tools/ball_tilt_oracle.py --durations 3 6 [--iters 1] [--lam 1e-3]
+    .venv/bin/python tools/lab/ball_tilt_oracle.py --durations 3 6 [--iters 1] [--lam 1e-3]
 """
 
 from __future__ import annotations

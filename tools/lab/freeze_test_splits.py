@@ -4,7 +4,7 @@
 policies on exactly the same paths (and needs no dataset generation). The meta data keeps the
 generator settings and the content hash of the full dataset the split came from.
 
-    tools/freeze_test_splits.py [--src data] [--dest datasets] [--only iiwa7/target_point,...]
+    tools/lab/freeze_test_splits.py [--src data] [--dest datasets] [--only iiwa7/target_point,...]
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ from pathlib import Path
 
 from pathrl.dataset.io import load_dataset, save_dataset
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 DATASETS = [("iiwa7", "random"), ("iiwa7", "target_point"), ("iiwa7", "ball_balancing"), ("armar6", "random"),
             ("armar4", "random"), ("armar4", "target_point"), ("iiwa7", "trueadapt_on_plate"),
             ("iiwa7", "trueadapt_in_place")]

@@ -1,13 +1,13 @@
 """Time-to-quality curves: evaluate a run's checkpoints on its test split and find when it met the paper's row.
 
-    python tools/time_to_quality.py --run runs/iiwa7_random/seed0 --row iiwa7/random [--run OTHER --label ...]
+    python tools/lab/time_to_quality.py --run runs/iiwa7_random/seed0 --row iiwa7/random [--run OTHER --label ...]
 
 Each run's checkpoints (every ``--every`` iterations and the last) are evaluated with the paper's protocol
 (deterministic policy, 1200 test segments of ``datasets/<robot>/<dataset>``, the committed split; whole paths with
 ``--segments full``, as the ball-balancing row), then
 ``--out`` gets ``curve.json`` (per run: the points, the target and the minutes to reach it) and ``curve.png``
 (duration and mean Cartesian deviation against training wall time). The target is a Table I row of
-``tools/paper_tables.yaml``: duration <= the paper's, mean Cartesian deviation <= ``--dev-factor`` x the
+``pathrl/config/paper/tracking.yaml``: duration <= the paper's, mean Cartesian deviation <= ``--dev-factor`` x the
 paper's, no limit violation. Evaluations are cached per checkpoint under ``--out``: a rerun only adds new ones.
 """
 
@@ -20,19 +20,18 @@ from pathlib import Path
 
 import yaml
 
-from pathrl.eval.curve import Target, curve_record, evaluate_curve, first_reaching, plot_curves
+from pathrl.config.paper import load as load_paper
+from pathrl.eval.curve import PAPER_EPISODES, Target, curve_record, evaluate_curve, first_reaching, plot_curves
 from pathrl.repro.tables import PATH_ROBOT, TABLE_I
 from pathrl.storage import write_json_atomic
-
-ROOT = Path(__file__).resolve().parents[1]
 
 
 def paper_target(row: str, dev_factor: float) -> Target:
     """Duration and dev_factor x mean Cartesian deviation of a Table I row (e.g. ``iiwa7/random``)."""
-    table = yaml.safe_load((ROOT / "tools" / "paper_tables.yaml").read_text())[TABLE_I]
-    if row not in table["rows"]:
-        raise ValueError(f"--row: {row!r} is not a Table I row; known: {sorted(table['rows'])}")
-    values = dict(zip(table["columns"], table["rows"][row], strict=True))
+    table = load_paper("tracking").table(TABLE_I)
+    if row not in table.rows:
+        raise ValueError(f"--row: {row!r} is not a Table I row; known: {sorted(table.rows)}")
+    values = table.row(row)
     return Target(float(values["duration_s"]), dev_factor * float(values["cart_pos_dev_mean_cm"]))
 
 
@@ -67,7 +66,7 @@ def main(argv: list[str] | None = None) -> int:
             if not (run / "config.yaml").is_file():
                 raise ValueError(f"--run: {run} is not a run directory (no config.yaml)")
             dataset = args.dataset or default_dataset(run)
-            episodes = args.episodes or (1200 if args.segments == "paper" else None)
+            episodes = args.episodes or (PAPER_EPISODES if args.segments == "paper" else None)
             pts = evaluate_curve(run, dataset, args.out / label.replace("/", "_"), args.every, episodes,
                                  segments=args.segments)
             curves[label] = pts

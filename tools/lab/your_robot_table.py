@@ -2,7 +2,7 @@
 committed evaluations in results/your_robot/ (``<robot>_student.json`` from pathrl-eval, ``<robot>_toppra.json``
 from pathrl-toppra, ``<robot>_training.json`` the shipped run's summary.json), written to results/your_robot/table.md.
 
-    tools/your_robot_table.py [--check]     # --check: exit 1 if table.md is not what the files give
+    tools/lab/your_robot_table.py [--check]     # --check: exit 1 if table.md is not what the files give
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ from pathlib import Path
 
 from pathrl.repro.render import time_out_pct
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 DIR = ROOT / "results" / "your_robot"
 #: The issue's bars for a student trained in <= 15 min: duration / TOPP-RA and mean Cartesian deviation.
 BAR_RATIO, BAR_CM, BAR_MIN = 1.15, 2.0, 15.0
@@ -41,7 +41,7 @@ def rows(folder: Path) -> list[dict[str, float | str | int]]:
 def markdown(rs: list[dict[str, float | str | int]]) -> str:
     """The table with the bars beside it."""
     lines = ["# Students of new robots against TOPP-RA", "",
-             "Written by `tools/your_robot_table.py` from the files beside it. The Table I recipe "
+             "Written by `tools/lab/your_robot_table.py` from the files beside it. The Table I recipe "
              "(`+experiment=iiwa7_random_track_distill`, DAgger from the law tracker) trained on each robot's "
              "generated paths (*trained on*: `pathrl-dataset generate robot=<robot> dataset=<it>`, seed 0), evaluated "
              "on the 1200 paper segments of the test split of its `dataset=random` paths (deterministic, 240 Hz limit "

@@ -1,9 +1,9 @@
 """The calibrated controller model (issue 47): curve-1 calibration table and ILC / constant-gain rows.
 
-    .venv/bin/python tools/industrial_abb.py calibrate   # -> results/industrial_abb_calibration.md
-    .venv/bin/python tools/industrial_abb.py ilc         # -> results/industrial_abb_ilc.md
-    .venv/bin/python tools/industrial_abb.py mpgd_gain   # -> results/industrial_abb_mpgd_gain.md
-    .venv/bin/python tools/industrial_abb.py table2 RUN_DIR   # -> results/industrial_abb_table2.md
+    .venv/bin/python tools/lab/industrial_abb.py calibrate   # -> results/industrial_abb_calibration.md
+    .venv/bin/python tools/lab/industrial_abb.py ilc         # -> results/industrial_abb_ilc.md
+    .venv/bin/python tools/lab/industrial_abb.py mpgd_gain   # -> results/industrial_abb_mpgd_gain.md
+    .venv/bin/python tools/lab/industrial_abb.py table2 RUN_DIR   # -> results/industrial_abb_table2.md
 
 ``table2`` runs MPGD, both ILC variants (their gains as tuned by ``ilc``: 1 and 1) and the policy of RUN_DIR
 on the nine rows and reports executions per row, ratios as means of per-row ratios with totals beside, t_opt
@@ -21,7 +21,7 @@ import time
 from dataclasses import asdict
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 
 
@@ -51,7 +51,7 @@ def calibrate() -> str:
             lines.append(f"| {v:g} | {name} | {r if r is not None else '-'} | {x:.3f} | {ratio} | {target} |")
         lines.append(f"| {v:g} | execution wall time (s) | - | {wall:.2f} | - | - |")
     return "\n".join(["# Calibrated controller model (controller.model=abb) on the recorded curve-1 program", "",
-                      "`python tools/industrial_abb.py calibrate` (seed 0, one core).", "", *lines, ""])
+                      "`python tools/lab/industrial_abb.py calibrate` (seed 0, one core).", "", *lines, ""])
 
 
 def ilc() -> str:
@@ -65,7 +65,7 @@ def ilc() -> str:
     ctrl = ControllerParams(model="abb")
     train = [training_target(i, seed=7) for i in range(6)]
     out = ["# ILC and constant error feedback on the calibrated model (controller.model=abb)", "",
-           "`python tools/industrial_abb.py ilc` (one core). Iterations = updates until the max error is <= 0.5 mm "
+           "`python tools/lab/industrial_abb.py ilc` (one core). Iterations = updates until the max error is <= 0.5 mm "
            "(0 = the baseline already is; N/A = not within 10 updates); in brackets the best max error (mm).", ""]
     tuned = {}
     for kind in ("p", "filtered"):
@@ -148,7 +148,7 @@ def table2(run_dir: str) -> str:
         lines.append(f"| {t.name} | {t.speed:.0f} | {res['MPGD'].history[0]:.2f} | " + " | ".join(cells) + " |")
     out = [f"# Calibrated model (controller.model=abb): executions to 0.5 mm per row, policy {run_dir} "
            f"(iteration {it}, action clip {clip:g})", "",
-           f"`python tools/industrial_abb.py table2 {run_dir}` (one core). Executions including the baseline's "
+           f"`python tools/lab/industrial_abb.py table2 {run_dir}` (one core). Executions including the baseline's "
            "(N/A = not within k_max: MPGD 50, ILC and RL 10); best max error (mm) in brackets.", "",
            "| Traj. | speed (mm/s) | baseline (mm) | " + " | ".join(methods) + " |",
            "|" + "---|" * (3 + len(methods)), *lines, ""]
@@ -201,7 +201,7 @@ def mpgd_gain() -> str:
 def main() -> None:
     what = sys.argv[1] if len(sys.argv) > 1 else ""
     if what not in ("calibrate", "ilc", "mpgd_gain", "table2") or (what == "table2" and len(sys.argv) < 3):
-        raise SystemExit("usage: tools/industrial_abb.py {calibrate,ilc,mpgd_gain,table2 RUN_DIR}")
+        raise SystemExit("usage: tools/lab/industrial_abb.py {calibrate,ilc,mpgd_gain,table2 RUN_DIR}")
     run = {"calibrate": calibrate, "ilc": ilc, "mpgd_gain": mpgd_gain, "table2": lambda: table2(sys.argv[2])}
     text = run[what]()
     name = {"calibrate": "calibration", "ilc": "ilc", "mpgd_gain": "mpgd_gain", "table2": "table2"}[what]

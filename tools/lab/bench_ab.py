@@ -5,7 +5,7 @@ next, so two `make bench` runs cannot resolve a 20 % change. This script imports
 checkout in turn (purging the other from ``sys.modules``), steps `tools/bench.py`'s env (synthetic paths,
 random actions, 4096 envs, compiled limit kernels, one thread) and reports CPU-time rates per repetition:
 
-    python tools/bench_ab.py --base /path/to/other/checkout [--robot iiwa7] [--reps 4]
+    python tools/lab/bench_ab.py --base /path/to/other/checkout [--robot iiwa7] [--reps 4]
 
 Both checkouts must be importable with this interpreter (same dependencies). Prints one line per checkout.
 """
@@ -22,7 +22,7 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import torch  # noqa: E402
 
-HERE = Path(__file__).resolve().parents[1]
+HERE = Path(__file__).resolve().parents[2]
 
 
 def _load(root: Path, roots: list[Path]):
