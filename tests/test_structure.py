@@ -123,6 +123,7 @@ LAYERS: list[tuple[str, ...]] = [
     ("pathrl.train",),  # training: PPO, distillation, warm starts, evaluation curves
     ("pathrl.industrial", "pathrl.repro"),  # the industrial controller; the paper's tables from results
     ("pathrl.viz",),  # viewers (rerun) of runs, evaluations and recordings
+    ("pathrl.families",),  # the family registry: each task family's env, evaluation, recording, viewer, tables
     ("pathrl.cli",),  # the command-line front doors (Hydra)
 ]
 

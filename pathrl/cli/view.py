@@ -3,7 +3,8 @@
     pathrl-view PATH [--save OUT.rrd] [--spawn | --serve] [--episodes 0,5,17 | --worst N]
                 [--timeline time|episode]
 
-PATH is a run directory (its ``episodes.mcap`` and/or ``run.mcap``; ``industrial.mcap`` of ``pathrl-industrial
+Every family's recordings (:mod:`pathrl.families`: each names its files and their converter) are served the same
+way. PATH is a run directory (its ``episodes.mcap`` and/or ``run.mcap``; ``industrial.mcap`` of ``pathrl-industrial
 record``, ``trueadapt.mcap`` of ``tools/trueadapt_record.py``) or one of those files. Each MCAP becomes
 one ``.rrd`` next to it (``episodes.rrd`` / ``run.rrd``; a selection ``episodes_worst5.rrd`` /
 ``episodes_ep0-5-17.rrd``, so the full recording is never replaced by a part of it) unless ``--save`` names the
@@ -67,14 +68,16 @@ def parse_ids(text: str) -> list[int]:
 
 def inputs_of(path: Path) -> list[tuple[str, Path]]:
     """[(kind, mcap)] to convert for PATH (a run directory or an MCAP file)."""
-    from pathrl.viz.rerun_view import FILE_NAMES, kind_of
+    from pathrl.families import file_names
+    from pathrl.viz.rerun_view import kind_of
 
     if not path.exists():
         raise UserError(f"no such file or directory: {path}")
     if path.is_dir():
-        found = [path / n for n in FILE_NAMES if (path / n).is_file()]
+        names = file_names()  # every family's recordings
+        found = [path / n for n in names if (path / n).is_file()]
         if not found:
-            raise UserError(f"{path}: no {', '.join(FILE_NAMES)} in this directory")
+            raise UserError(f"{path}: no {', '.join(names)} in this directory")
         return [(kind_of(f), f) for f in found]
     return [(kind_of(path), path)]
 
@@ -91,6 +94,7 @@ def default_output(src: Path, ids: list[int] | None, worst: int | None) -> Path:
 
 
 def _main(argv: list[str]) -> None:
+    from pathrl.families import ViewOptions, recording_of, resolve
     from pathrl.viz import rerun_view as rv
 
     args = build_parser().parse_args(argv)
@@ -111,31 +115,23 @@ def _main(argv: list[str]) -> None:
             raise UserError(
                 f"{args.path} has {' and '.join(s.name for _, s in jobs)}; --save takes one input (pass the file)"
             )
-        kinds = {k for k, _ in jobs}
-        if (ids is not None or args.worst is not None) and "episodes" not in kinds:
+        recs = {kind: recording_of(kind) for kind, _ in jobs}
+        if (ids is not None or args.worst is not None) and not any(r.selectable for r in recs.values()):
             raise UserError(f"--episodes/--worst need an episodes.mcap; {args.path} has none")
-        targets = [(kind, src, args.save or default_output(src, ids if kind == "episodes" else None,
-                                                           args.worst if kind == "episodes" else None))
+        sel = {kind: r.selectable for kind, r in recs.items()}
+        targets = [(kind, src, args.save or default_output(src, ids if sel[kind] else None,
+                                                           args.worst if sel[kind] else None))
                    for kind, src in jobs]
         for _, _, out in targets:
             output_file(out, "--save" if args.save else "output")
         outs = []
+        view = ViewOptions(ids, args.worst, args.timeline)
         for kind, src, out in targets:
             if not is_finished(src):
                 print(f"warning: {src} ends without the MCAP footer (cut off, or a run killed or still writing); "
                       "converting what is readable", file=sys.stderr)
-            if kind == "episodes":
-                stats = rv.episodes_to_rrd(src, out, ids=ids, worst=args.worst, timeline=args.timeline)
-                what = f"{stats.items} episodes"
-            elif kind == "industrial":
-                stats = rv.industrial_to_rrd(src, out)
-                what = f"{stats.items} executions"
-            elif kind == "trueadapt":
-                stats = rv.trueadapt_to_rrd(src, out)
-                what = f"{stats.items} TrueAdapt episodes"
-            else:
-                stats = rv.run_to_rrd(src, out)
-                what = f"{stats.items} training curves"
+            stats = resolve(recs[kind].view)(src, out, view)
+            what = f"{stats.items} {recs[kind].items}"
             for note in stats.warnings:
                 print(f"warning: {note}", file=sys.stderr)
             print(f"wrote {out} ({what}, {stats.bytes / 1e6:.1f} MB, {stats.seconds:.1f} s)")
