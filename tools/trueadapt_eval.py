@@ -19,36 +19,23 @@ from __future__ import annotations
 
 import argparse
 import json
-import time
 from pathlib import Path
 
 import torch
 
 from pathrl.cli.common import ArgParser, UserError, compose, output_dir, run_cli, to_container
-from pathrl.envs.device import EVAL_DEVICE
-from pathrl.envs.trueadapt import build_trueadapt_env
-from pathrl.eval.trueadapt import ObservingPolicy, evaluate, reference_policy, summary
-from pathrl.eval.trueadapt_limits import LimitCounter
-from pathrl.runs import committed_split
+from pathrl.families.trueadapt import Source, controller_spec, evaluate_loaded
+from pathrl.families.trueadapt import load as load_family
 from pathrl.schema import TrainAppCfg
 
-
-def controller_spec(text: str) -> dict:
-    """``reference`` -> {"name": "reference"}; a YAML mapping ``{name: ..., <keys>}`` as it is."""
-    import yaml
-
-    spec = yaml.safe_load(text)
-    spec = {"name": spec} if isinstance(spec, str) else spec
-    if not isinstance(spec, dict):
-        raise ValueError(f"--controller: expected a name or a YAML mapping, got {text!r}")
-    return spec
+__all__ = ["controller_spec", "load", "main", "parse_args"]
 
 
 def load(args: argparse.Namespace, num_envs: int, **overrides):
     """(env, actor) of the command line (``run``, ``task``, ``checkpoint``, ``controller``, ``backend``, ``split``,
-    ``dataset``, ``seed``): the run's config (or the ``task`` experiment's) on `num_envs` envs without autoreset,
-    `overrides` replacing env settings; the actor (obs -> actions) is ``--controller``, the run's controller or the
-    run's checkpoint, None for the reference without adaptation. ValueError / OSError on bad input."""
+    ``dataset``, ``seed``): the run's config (or the ``task`` experiment's) loaded by the TrueAdapt family
+    (:func:`pathrl.families.trueadapt.load`); None for the reference without adaptation. ValueError / OSError on bad
+    input."""
     ckpt = None
     if args.run is None:
         cfg = to_container(compose("train", [f"+experiment=iiwa7_trueadapt_{args.task}"], TrainAppCfg))
@@ -56,29 +43,11 @@ def load(args: argparse.Namespace, num_envs: int, **overrides):
         from pathrl.runs import load_run
 
         cfg, ckpt, _ = load_run(args.run)
-        ckpt = args.checkpoint or ckpt
-    spec = controller_spec(args.controller) if args.controller is not None else cfg.get("controller")
-    cfg["task"]["backend"] = args.backend
-    if getattr(args, "workers", None) is not None:
-        cfg["task"]["workers"] = args.workers
-    dataset = args.dataset or committed_split(cfg["dataset"]["path"], args.split)
-    args.resolved_dataset = dataset  # recorded with the result
-    # the evaluation device, not the one the run was trained on (a GPU-trained run evaluates on a CPU-only machine)
-    env = build_trueadapt_env(cfg, args.split, num_envs, dataset, args.seed, autoreset=False,
-                              **{"device": EVAL_DEVICE, **overrides})
-    try:
-        if spec is not None:
-            from pathrl.runs import make_controller
-
-            return env, make_controller(spec, env)
-        if args.run is not None:
-            from pathrl.runs import load_policy
-
-            return env, load_policy(cfg, env, ckpt)
-        return env, None
-    except BaseException:
-        env.close()
-        raise
+    spec = controller_spec(args.controller) if args.controller is not None else None
+    src = Source(args.checkpoint, spec, args.backend, getattr(args, "workers", None), args.dataset, args.split,
+                 args.seed)
+    env, actor, args.resolved_dataset = load_family(cfg, ckpt, src, num_envs, **overrides)  # dataset: recorded
+    return env, actor
 
 
 def parse_args(argv: list[str]) -> argparse.Namespace:
@@ -114,18 +83,15 @@ def _main(argv: list[str]) -> None:
         env, actor = load(args, min(args.num_envs, args.episodes), **({"obs_ball": False} if args.open_loop else {}))
     except (ValueError, OSError) as exc:  # RunError, DatasetError, a bad controller or config
         raise UserError(str(exc).splitlines()[0] if str(exc) else type(exc).__name__) from None
-    policy = reference_policy if actor is None else ObservingPolicy(actor)
-    traj = torch.arange(args.episodes) % env.bank.num
-    limits = LimitCounter(env)
-    t0 = time.perf_counter()
     try:
-        res = summary(evaluate(env, policy, traj, limits)) | {"backend": args.backend}
+        got = evaluate_loaded(env, actor, args.episodes)
     finally:
         env.close()
-    res |= {"limit_violations": limits.counts["total"], "limit_violations_by_kind": limits.counts,
-            "setpoints_checked": limits.checked, "dataset": args.resolved_dataset, "split": args.split,
-            "trajectories_in_split": env.bank.num,
-            "seconds": round(time.perf_counter() - t0, 1), "command": " ".join(["tools/trueadapt_eval.py", *argv])}
+    keys = ("limit_violations", "limit_violations_by_kind", "setpoints_checked")
+    res = {k: v for k, v in got.items() if k not in (*keys, "trajectories_in_split", "seconds")}
+    res |= {"backend": args.backend, **{k: got[k] for k in keys}, "dataset": args.resolved_dataset,
+            "split": args.split, "trajectories_in_split": got["trajectories_in_split"], "seconds": got["seconds"],
+            "command": " ".join(["tools/trueadapt_eval.py", *argv])}
     print(json.dumps(res, indent=1))
     if args.out is not None:
         from pathrl.storage import write_json_atomic

@@ -12,7 +12,11 @@ The arguments are Hydra overrides of ``conf/eval_app.yaml`` (schema :class:`path
 task to a run trained without one (its sensor values stay unobserved); runs with a task are simulated with
 ``backend`` (default PyBullet). ``open_loop=true`` freezes the task's sensor at its first value of each episode.
 ``checkpoint`` evaluates that checkpoint of a training run instead of its latest. ``run_dir`` may also be a
-model-based controller's directory (``models/iiwa7_ball_tray_controller``). ``metrics.json`` and ``episodes.mcap``
+model-based controller's directory (``models/iiwa7_ball_tray_controller``), or a run of another task family
+(:mod:`pathrl.families`, found by :func:`~pathrl.families.family_of`): a TrueAdapt run or model is evaluated on
+``episodes`` trajectories (default 1000) of its split with Table I's metrics (``backend``, ``open_loop``,
+``checkpoint`` apply; no ``episodes.mcap``), an industrial policy (``pathrl-industrial train``) by its learned IWA on
+the first ``episodes`` rows of Table II. ``metrics.json`` and ``episodes.mcap``
 go to ``out``, by default the run directory; a shipped model's (``models/<name>``) go to ``runs/eval/<name>``:
 nothing is written inside ``models/`` unless ``write_models=true``. The output directory is checked before the
 evaluation runs.
@@ -25,6 +29,8 @@ from pathlib import Path
 from typing import Any
 
 from pathrl.cli.common import UserError, compose, key_value_app, output_dir, run_cli, schema_keys
+from pathrl.families.tracking import OFFSET_WARN_RAD
+from pathrl.families.tracking import offset_line as _offset_line  # noqa: F401 (kept for its callers)
 
 __all__ = ["OFFSET_WARN_RAD", "main", "output_of"]
 
@@ -124,7 +130,8 @@ def _path_files_as_dataset(run_dir: Path, dataset_path: str | None) -> str | Non
 
 def _main(argv: list[str]) -> None:
     from pathrl.dataset.io import DatasetError
-    from pathrl.eval.evaluate import EvalOptions, evaluate
+    from pathrl.eval.evaluate import EvalOptions
+    from pathrl.families import family_of
     from pathrl.runs import RunError, load_run
 
     if any(a in ("-h", "--help") for a in argv):
@@ -147,44 +154,11 @@ def _main(argv: list[str]) -> None:
                            task=cfg["task"], backend=cfg["backend"], compile_limits=cfg["compile_limits"],
                            open_loop=cfg["open_loop"], checkpoint=cfg["checkpoint"],
                            out_of_limits=cfg["dataset"]["out_of_limits"])
-        m = evaluate(run_dir, opts)
+        family = family_of(run_dir)
+        m = family.step("evaluate")(run_dir, opts)
     except (RunError, DatasetError) as exc:
         raise UserError(str(exc)) from None
-    _print_table(m)
-    print(f"wrote {out / 'metrics.json'}" + (f" and {out / 'episodes.mcap'}" if cfg["record"] else ""))
-
-
-def _print_table(m: dict) -> None:
-    from rich.console import Console
-    from rich.table import Table
-
-    t = Table(title=f"{m['robot']} on {m['dataset']} ({m['split']}, {m['segments']}, {m['episodes']} episodes)")
-    t.add_column("metric")
-    t.add_column("value", justify="right")
-    for k in ("duration_s", "joint_dev_mean_rad", "joint_dev_max_rad", "joint_dev_final_rad",
-              "cart_pos_dev_mean_cm", "cart_pos_dev_max_cm", "cart_pos_dev_final_cm",
-              "cart_rot_dev_mean_deg", "cart_rot_dev_max_deg", "cart_rot_dev_final_deg",
-              "duration_end_of_path_s", "terminated_early_pct", "task_failed_pct", "limit_violations"):
-        if k not in m:
-            continue
-        v = m[k]
-        t.add_row(k, f"{v:.3f}" if isinstance(v, float) else str(v))
-    Console().print(t)
-    if "per_joint" in m:
-        print(_offset_line(m["per_joint"]))
-
-
-#: A path joint whose mean signed error (commanded minus reference) exceeds this is listed under the table (rad).
-OFFSET_WARN_RAD = 0.02
-
-
-def _offset_line(per_joint: dict[str, dict[str, float]]) -> str:
-    """One line naming the joints held off the path by more than :data:`OFFSET_WARN_RAD` on average (or none)."""
-    from pathrl.eval.metrics import offset_joints
-
-    big = offset_joints(per_joint, OFFSET_WARN_RAD)
-    listed = ", ".join(f"{n} {per_joint[n]['offset_rad']:+.3f} ({100 * per_joint[n]['share']:.0f} %)" for n in big)
-    return f"joint offsets > {OFFSET_WARN_RAD} rad (mean signed error, share of squared deviation): {listed or 'none'}"
+    family.step("report")(m, out, opts)
 
 
 def main(argv: list[str] | None = None) -> int:

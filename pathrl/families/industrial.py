@@ -13,12 +13,14 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import asdict
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from pathrl.eval.evaluate import EvalOptions
 from pathrl.families import ViewOptions
+
+if TYPE_CHECKING:
+    from pathrl.eval.evaluate import EvalOptions
 
 __all__ = ["COLUMNS", "build", "detect", "evaluate", "policy_of", "record", "report", "table_rows", "targets",
            "timing", "validate", "view_industrial"]

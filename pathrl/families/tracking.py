@@ -7,10 +7,12 @@ from __future__ import annotations
 
 from dataclasses import asdict, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from pathrl.eval.evaluate import EvalOptions
 from pathrl.families import ViewOptions
+
+if TYPE_CHECKING:
+    from pathrl.eval.evaluate import EvalOptions
 
 __all__ = ["OFFSET_WARN_RAD", "TABLE_KEYS", "build", "detect", "evaluate", "offset_line", "print_table", "record",
            "report", "table_rows", "timing", "validate", "view_episodes", "view_run"]
@@ -31,12 +33,14 @@ def detect(run_dir: Path) -> bool:
 
 
 def build(run_dir: Path, opts: EvalOptions):
-    """The run's env for evaluation (:data:`pathrl.envs.registry.EVAL_ENV`) on `opts`' dataset, split and envs."""
+    """The run's env for evaluation (:data:`pathrl.envs.registry.EVAL_ENV`) on `opts`' dataset (default: the run's,
+    or its committed split), split and envs."""
     from pathrl.envs.registry import EVAL_ENV, EnvRequest, make_env
-    from pathrl.runs import load_run
+    from pathrl.runs import committed_split, load_run
 
     cfg, _, _ = load_run(run_dir)
-    req = EnvRequest(split=opts.split, num_envs=opts.num_envs, seed=opts.seed, dataset_path=opts.dataset_path,
+    dataset = opts.dataset_path or committed_split(cfg["dataset"]["path"], opts.split)
+    req = EnvRequest(split=opts.split, num_envs=opts.num_envs, seed=opts.seed, dataset_path=dataset,
                      backend=opts.backend)
     return make_env(cfg, req, **EVAL_ENV)
 

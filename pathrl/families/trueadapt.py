@@ -13,10 +13,12 @@ from __future__ import annotations
 import time
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from pathrl.eval.evaluate import EvalOptions
 from pathrl.families import ViewOptions
+
+if TYPE_CHECKING:
+    from pathrl.eval.evaluate import EvalOptions
 
 __all__ = ["EPISODES", "Source", "build", "controller_spec", "detect", "evaluate", "evaluate_loaded", "load", "record",
            "report", "table_rows", "timing", "validate", "view_trueadapt"]
