@@ -10,13 +10,16 @@ exp=$(basename "$(dirname "$run")"); seed=$(basename "$run")
 stash=results/checkpoints/${exp}_${seed}
 case $mode in
   save)
-    last=$(ls "$run"/model_*.pt | sed 's/.*model_\([0-9]*\)\.pt/\1/' | sort -n | tail -1)
-    [[ -n $last ]] || { echo "stash_run: no checkpoint in $run" >&2; exit 2; }
-    mkdir -p "$stash.tmp"
-    cp "$run/config.yaml" "$run/model_$last.pt" "$stash.tmp/"
+    # the newest checkpoint that loads (pathrl.storage.checkpoints: the one resume=true would continue from)
+    ckpt=$(.venv/bin/python -c "import sys; from pathlib import Path
+from pathrl.storage.checkpoints import latest_valid_checkpoint
+c = latest_valid_checkpoint(Path(sys.argv[1])); print(c or '')" "$run")
+    [[ -n $ckpt ]] || { echo "stash_run: no checkpoint in $run" >&2; exit 2; }
+    rm -rf "$stash.tmp" && mkdir -p "$stash.tmp"
+    cp "$run/config.yaml" "$ckpt" "$stash.tmp/"
     for f in summary.json run.mcap; do [[ -f $run/$f ]] && cp "$run/$f" "$stash.tmp/"; done
     rm -rf "$stash" && mv "$stash.tmp" "$stash"
-    echo "saved $run (model_$last.pt) -> $stash" ;;
+    echo "saved $run ($(basename "$ckpt")) -> $stash" ;;
   restore)
     [[ -d $stash ]] || { echo "stash_run: nothing stashed at $stash" >&2; exit 2; }
     [[ -e $run ]] && { echo "stash_run: $run exists; not overwritten" >&2; exit 2; }
