@@ -14,6 +14,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from ruckig import InputParameter, Result, Ruckig, Trajectory
 
 __all__ = ["Approach", "plan_approach"]
 
@@ -25,7 +26,7 @@ LIMIT_SCALE = 1.0 - 1e-9
 class Approach:
     """A planned final approach: `duration` (s), sampled with :meth:`sample`."""
 
-    trajectory: object  # ruckig.Trajectory
+    trajectory: Trajectory
     duration: float
     target: np.ndarray  # (D,) rad
 
@@ -48,8 +49,6 @@ def plan_approach(p: np.ndarray, v: np.ndarray, a: np.ndarray, target: np.ndarra
     """The time-optimal jerk-limited move from (p, v, a) (D,) to `target` (D,) at rest, or None if Ruckig finds
     none or it leaves `pos_limits` (D, 2) (rad; a start or target on a limit within rounding counts as inside).
     Limits vel, acc, jerk: (D,) magnitudes."""
-    from ruckig import InputParameter, Result, Ruckig, Trajectory
-
     d = len(p)
     otg, inp, traj = Ruckig(d), InputParameter(d), Trajectory(d)
     inp.max_velocity = (LIMIT_SCALE * vel).tolist()

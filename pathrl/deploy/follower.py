@@ -33,7 +33,6 @@ import torch
 from pathrl.dataset.io import OUT_OF_LIMITS, bounds_problem
 from pathrl.deploy.approach import Approach, plan_approach
 from pathrl.envs.registry import EVAL_ENV, get_task
-from pathrl.envs.rewards import build_reward_terms
 from pathrl.envs.tracking import PathTrackingEnv
 from pathrl.envs.tracking_cfg import TrackingEnvCfg
 from pathrl.limits.braking import is_stopped
@@ -236,9 +235,10 @@ class Follower:
         self._stopping, self._approach, self.measured_error = False, None, None
 
     def _build(self, paths: PathSet) -> tuple[PathTrackingEnv, torch.nn.Module]:
-        """The one-env env on `paths` and the policy, or a FollowerError."""
+        """The one-env env on `paths` and the policy, or a FollowerError. A follower does not learn: its env computes
+        no reward (the step's state, limits and observation do not depend on the reward terms)."""
         try:
-            env = PathTrackingEnv(self.env_cfg, self.robot, paths, build_reward_terms(self.cfg["reward"]["terms"]))
+            env = PathTrackingEnv(self.env_cfg, self.robot, paths, [])
             return env, load_policy(self.cfg, env, self.checkpoint)
         except (RunError, KeyError, ValueError) as exc:
             raise FollowerError(f"{self.checkpoint}: {exc}") from None
