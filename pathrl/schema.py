@@ -142,6 +142,7 @@ class EvalAppCfg:
     compile_limits: bool = False
     open_loop: bool = False  # freeze the task's sensor at its first value of each episode
     checkpoint: str | None = None  # model_K.pt of a training run; default: its latest
+    workers: int | None = None  # PyBullet worker processes of a TrueAdapt run; default: its config's
 
 
 @dataclass

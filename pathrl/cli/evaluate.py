@@ -4,7 +4,7 @@
                 [episodes=N] [segments=paper|full] [seed=0] [out=DIR] [write_models=true|false]
                 [record=true|false] [num_envs=1200]
                 [task=ball_on_plate|standing] [backend=pybullet|analytic] [compile_limits=true|false]
-                [open_loop=true|false] [checkpoint=model_K.pt] [dataset.out_of_limits=refuse|clip]
+                [open_loop=true|false] [checkpoint=model_K.pt] [dataset.out_of_limits=refuse|clip] [workers=N]
 
 The arguments are Hydra overrides of ``conf/eval_app.yaml`` (schema :class:`pathrl.schema.EvalAppCfg`).
 ``dataset=NAME`` is ``data/<the run's robot>/NAME`` (short for ``dataset.name=NAME``); neither ``dataset`` nor
@@ -15,11 +15,11 @@ task to a run trained without one (its sensor values stay unobserved); runs with
 model-based controller's directory (``models/iiwa7_ball_tray_controller``), or a run of another task family
 (:mod:`pathrl.families`, found by :func:`~pathrl.families.family_of`): a TrueAdapt run or model is evaluated on
 ``episodes`` trajectories (default 1000) of its split with Table I's metrics (``backend``, ``open_loop``,
-``checkpoint`` apply; no ``episodes.mcap``), an industrial policy (``pathrl-industrial train``) by its learned IWA on
-the first ``episodes`` rows of Table II. ``metrics.json`` and ``episodes.mcap``
-go to ``out``, by default the run directory; a shipped model's (``models/<name>``) go to ``runs/eval/<name>``:
-nothing is written inside ``models/`` unless ``write_models=true``. The output directory is checked before the
-evaluation runs.
+``checkpoint`` and ``workers``, its PyBullet worker processes, apply; no ``episodes.mcap``), an industrial policy
+(``pathrl-industrial train``) by its learned IWA on the first ``episodes`` rows of Table II. ``metrics.json`` and
+``episodes.mcap`` go to ``out``, by default the run directory; a shipped model's (``models/<name>``) go to
+``runs/eval/<name>``: nothing is written inside ``models/`` unless ``write_models=true``. The output directory is
+checked before the evaluation runs.
 """
 
 from __future__ import annotations
@@ -93,6 +93,8 @@ def _config(argv: list[str]) -> dict[str, Any]:
         raise UserError(f"episodes must be >= 1, got {cfg['episodes']}")
     if cfg["num_envs"] < 1:
         raise UserError(f"num_envs must be >= 1, got {cfg['num_envs']}")
+    if cfg["workers"] is not None and cfg["workers"] < 1:
+        raise UserError(f"workers must be >= 1, got {cfg['workers']}")
     return {**cfg, "task": None if cfg["task"] is None else cfg["task"]["name"]}
 
 
@@ -153,7 +155,7 @@ def _main(argv: list[str]) -> None:
                            write_models=cfg["write_models"], num_envs=cfg["num_envs"], record=cfg["record"],
                            task=cfg["task"], backend=cfg["backend"], compile_limits=cfg["compile_limits"],
                            open_loop=cfg["open_loop"], checkpoint=cfg["checkpoint"],
-                           out_of_limits=cfg["dataset"]["out_of_limits"])
+                           out_of_limits=cfg["dataset"]["out_of_limits"], workers=cfg["workers"])
         family = family_of(run_dir)
         m = family.step("evaluate")(run_dir, opts)
     except (RunError, DatasetError) as exc:

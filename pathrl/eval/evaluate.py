@@ -59,7 +59,8 @@ class EvalOptions:
     17 s eager, 35 s compiled). ``open_loop``: the task's sensor stays at its first value of each episode
     (:class:`FrozenSensor`). ``checkpoint``: a checkpoint file name in the run directory (e.g. ``model_99.pt``)
     instead of the latest one. ``out_of_limits``: paths of the dataset that leave the robot's position limits are
-    refused or clipped (``refuse`` | ``clip``).
+    refused or clipped (``refuse`` | ``clip``). ``workers``: the PyBullet worker processes of a TrueAdapt run
+    (:mod:`pathrl.families.trueadapt`; None: its config's).
     """
 
     dataset_path: str | None = None
@@ -78,6 +79,7 @@ class EvalOptions:
     open_loop: bool = False
     checkpoint: str | None = None
     out_of_limits: str = "refuse"
+    workers: int | None = None  # PyBullet worker processes of a TrueAdapt run (None: its config's)
 
 
 def output_dir_of(run_dir: Path, out_dir: Path | None = None) -> Path:

@@ -81,8 +81,8 @@ def load(cfg: dict[str, Any], ckpt: Path | None, src: Source, num_envs: int, **o
 
 
 def _source(opts: EvalOptions) -> Source:
-    return Source(Path(opts.checkpoint) if opts.checkpoint else None, None, opts.backend, None, opts.dataset_path,
-                  opts.split, opts.seed)
+    return Source(Path(opts.checkpoint) if opts.checkpoint else None, None, opts.backend, opts.workers,
+                  opts.dataset_path, opts.split, opts.seed)
 
 
 def _load_run(run_dir: Path, opts: EvalOptions, num_envs: int, **overrides: Any):
