@@ -1,15 +1,17 @@
-"""`reproduce_tables.py --reuse` keeps a result only while its inputs are unchanged (pathrl.repro.inputs)."""
+"""`reproduce_tables.py --reuse` keeps a result only while its inputs are unchanged (pathrl.repro.inputs; the steps:
+pathrl.repro.steps)."""
 
 from __future__ import annotations
 
-import importlib.util
 import json
-import sys
 from pathlib import Path
 
 import pytest
 
+from pathrl.repro import steps
+from pathrl.repro import trueadapt as adapt
 from pathrl.repro.inputs import fingerprint, inputs_file, record, stale
+from pathrl.repro.layout import PROFILES, Layout
 from pathrl.repro.tables import Evaluation
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -86,18 +88,8 @@ def test_sidecar_of_a_file_result(tmp_path: Path):
     assert inputs_file(tmp_path / "x" / "metrics.json") == tmp_path / "x" / "inputs.json"
 
 
-def _tool(monkeypatch):
-    """tools/reproduce_tables.py as a module (registered while imported: its dataclasses look themselves up)."""
-    spec = importlib.util.spec_from_file_location("reproduce_tables", ROOT / "tools" / "reproduce_tables.py")
-    mod = importlib.util.module_from_spec(spec)
-    monkeypatch.setitem(sys.modules, spec.name, mod)
-    spec.loader.exec_module(mod)
-    return mod
-
-
 def test_evaluate_reuses_until_the_policy_changes(repo: Path, monkeypatch, capsys):
-    """The tool's `evaluate` on a fake layout (the evaluation command stubbed: nothing runs)."""
-    tool = _tool(monkeypatch)
+    """The `evaluate` step on a fake layout (the evaluation command stubbed: nothing runs)."""
     runs: list[list[str]] = []
 
     def fake_sh(cmd: list[str], log: Path) -> None:
@@ -106,16 +98,16 @@ def test_evaluate_reuses_until_the_policy_changes(repo: Path, monkeypatch, capsy
         out.mkdir(parents=True, exist_ok=True)
         (out / "metrics.json").write_text("{}")
 
-    monkeypatch.setattr(tool, "sh", fake_sh)
-    monkeypatch.setattr(tool, "CONTROLLER_MODELS", frozenset({"balance"}))
+    monkeypatch.setattr(steps, "sh", fake_sh)
+    monkeypatch.setattr(steps, "CONTROLLER_MODELS", frozenset({"balance"}))
     (repo / "models" / "balance" / "config.yaml").write_text(
         f"controller:\n  name: balance\n  policy: {repo / 'models' / 'policy_a'}\n")
-    lay = tool.Layout(repo / "results", repo / "models", repo / "runs", repo / "datasets", repo / "data")
+    lay = Layout(repo / "results", repo / "models", repo / "runs", repo / "datasets", repo / "data")
     e = Evaluation("balance", "armar4", "target_point")
     raw = repo / "results" / "raw" / e.id
 
     def run() -> None:
-        tool.evaluate(e, tool.PROFILES["quick"], lay, True, repo / "results" / "logs")
+        steps.evaluate(e, PROFILES["quick"], lay, True, repo / "results" / "logs")
 
     raw.mkdir(parents=True)
     (raw / "metrics.json").write_text("{}")
@@ -136,7 +128,6 @@ def test_evaluate_reuses_until_the_policy_changes(repo: Path, monkeypatch, capsy
 
 
 def test_path_change_re_evaluates_new_weights(repo: Path, monkeypatch):
-    tool = _tool(monkeypatch)
     runs: list[list[str]] = []
 
     def fake_sh(cmd: list[str], log: Path) -> None:
@@ -144,12 +135,12 @@ def test_path_change_re_evaluates_new_weights(repo: Path, monkeypatch):
         Path(cmd[5]).parent.mkdir(parents=True, exist_ok=True)
         Path(cmd[5]).write_text("{}")
 
-    monkeypatch.setattr(tool, "sh", fake_sh)
-    lay = tool.Layout(repo / "results", repo / "models", repo / "runs", repo / "datasets", repo / "data")
+    monkeypatch.setattr(steps, "sh", fake_sh)
+    lay = Layout(repo / "results", repo / "models", repo / "runs", repo / "datasets", repo / "data")
 
     def run() -> None:
-        tool.path_change("armar4/target_point", "policy_a", "armar4/target_point", tool.PROFILES["quick"], lay, True,
-                         repo / "results" / "logs")
+        steps.path_change("armar4/target_point", "policy_a", "armar4/target_point", PROFILES["quick"], lay, True,
+                          repo / "results" / "logs")
 
     run()
     run()
@@ -160,25 +151,28 @@ def test_path_change_re_evaluates_new_weights(repo: Path, monkeypatch):
 
 
 def test_trueadapt_evaluation_records_its_inputs(tmp_path: Path, monkeypatch):
-    """A TrueAdapt evaluation (the reference, no model) on the committed split: recorded, then kept."""
-    tool = _tool(monkeypatch)
+    """A TrueAdapt evaluation (the reference: the controller directory models/iiwa7_trueadapt_on_plate_reference)
+    on the committed split runs pathrl-eval, no tool script: recorded, then kept."""
     runs: list[list[str]] = []
 
-    def fake_run(cmd: list[str] | None, log: Path) -> None:
-        if cmd is not None:
-            runs.append(cmd)
-            out = Path(cmd[cmd.index("--out") + 1])
-            out.mkdir(parents=True, exist_ok=True)
-            (out / "metrics.json").write_text("{}")
+    def fake_sh(cmd: list[str], log: Path) -> None:
+        runs.append(cmd)
+        out = Path(next(a for a in cmd if a.startswith("out="))[4:])
+        out = out if out.is_absolute() else steps.ROOT / out
+        assert out == tmp_path / "raw" / a.id
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "metrics.json").write_text("{}")
 
-    monkeypatch.setattr(tool, "run_script", fake_run)
-    lay = tool.Layout(tmp_path, tmp_path / "models", tmp_path / "runs", tmp_path / "datasets", tmp_path / "data")
-    a = tool.adapt.AdaptEval("on_plate")
+    monkeypatch.setattr(steps, "sh", fake_sh)
+    lay = Layout(tmp_path, tmp_path / "models", tmp_path / "runs", tmp_path / "datasets", tmp_path / "data")
+    a = adapt.AdaptEval("on_plate")
     for _ in range(2):
-        tool.adapt_evaluate(a, tool.PROFILES["quick"], lay, True, tmp_path / "logs")
+        steps.adapt_evaluate(a, PROFILES["quick"], lay, True, tmp_path / "logs")
     files = json.loads((tmp_path / "raw" / a.id / "inputs.json").read_text())["files"]
-    assert len(runs) == 1 and sorted(files) == ["datasets/iiwa7/trueadapt_on_plate/dataset.json",
-                                                "datasets/iiwa7/trueadapt_on_plate/test.npz"]
+    assert len(runs) == 1 and Path(runs[0][0]).name == "pathrl-eval" and not any("tools/" in x for x in runs[0])
+    assert sorted(files) == ["datasets/iiwa7/trueadapt_on_plate/dataset.json",
+                             "datasets/iiwa7/trueadapt_on_plate/test.npz",
+                             "models/iiwa7_trueadapt_on_plate_reference/config.yaml"]
 
 
 def test_train_jobs_train_a_generalization_row_on_its_train_dataset(monkeypatch):
@@ -186,13 +180,12 @@ def test_train_jobs_train_a_generalization_row_on_its_train_dataset(monkeypatch)
     evaluated on; a generalization row without one and a second test split train nothing themselves."""
     from pathrl.repro.tables import ROWS, TABLE_IV, Evaluation
 
-    tool = _tool(monkeypatch)
     evals = [r.evaluation for r in ROWS if r.table == TABLE_IV]
-    jobs = tool.training_jobs(evals)
+    jobs = steps.training_jobs(evals)
     assert jobs["iiwa7_random_broad_track_distill"].dataset == "random_broad"
     assert jobs["armar4_random_broad_track_distill"].dataset == "random_broad"
     assert not any(e.dataset == "target_point" for e in jobs.values())
     assert "iiwa7_random" not in jobs  # trained by its own rows (Tables I-III), not on target points
     plain = Evaluation("iiwa7_random", "iiwa7", "random")
-    assert tool.training_jobs([plain, Evaluation("x", "iiwa7", "random", second_test_set=True)]) == \
+    assert steps.training_jobs([plain, Evaluation("x", "iiwa7", "random", second_test_set=True)]) == \
         {"iiwa7_random": plain}

@@ -77,9 +77,9 @@ def test_missing_train_split_renders_as_not_available(tmp_path):
     assert adapt.eval_command(train, root, root / "results" / "raw", 1000) is None
     test = dataclasses.replace(train, split="test", open_loop=True)
     assert adapt.eval_command(test, root, root / "results" / "raw", 12) == [
-        "tools/trueadapt_eval.py", "--run", f"models/{train.model}", "--dataset", "datasets/iiwa7/trueadapt_on_plate",
-        "--split", "test", "--episodes", "12", "--seed", "0", "--backend", "pybullet", "--workers", "1", "--out",
-        f"results/raw/{train.model}_in_pybullet_open_loop", "--open-loop"]
+        "pathrl-eval", f"run_dir=models/{train.model}", "dataset.path=datasets/iiwa7/trueadapt_on_plate", "split=test",
+        "episodes=12", "seed=0", "backend=pybullet", "workers=1", "num_envs=250",
+        f"out=results/raw/{train.model}_in_pybullet_open_loop", "open_loop=true"]
     (root / "results" / "raw" / test.id).mkdir(parents=True)
     (root / "results" / "raw" / test.id / "metrics.json").write_text("{}")
     assert adapt.eval_command(test, root, root / "results" / "raw", 12, reuse=True) is None
@@ -89,8 +89,8 @@ def test_rows_cover_the_paper_and_name_shipped_models():
     paper = adapt.paper()
     assert {r.key for r in adapt.ROWS if r.in_paper} == set(paper["rows"])
     assert all(len(v) == len(paper["columns"]) for v in paper["rows"].values())
-    for e in adapt.evaluations():
-        assert e.model is None or (ROOT / "models" / e.model / "config.yaml").is_file(), e.model
+    for e in adapt.evaluations():  # the reference's directory too (the controller `reference`)
+        assert (ROOT / "models" / e.run / "config.yaml").is_file(), e.run
     assert len({e.id for e in adapt.evaluations()}) == len(adapt.evaluations())
     assert adapt.VALIDATION_ID in adapt.names() and "iiwa7_trueadapt_in_place_reference" in adapt.names()
 
@@ -115,6 +115,58 @@ def test_a_fresh_checkout_evaluates_on_the_committed_split(tmp_path, monkeypatch
     assert committed_split("data/iiwa7/trueadapt_on_plate", "test") == "datasets/iiwa7/trueadapt_on_plate"
     assert committed_split("data/iiwa7/trueadapt_on_plate", "train") == "data/iiwa7/trueadapt_on_plate"
 
+
+
+def test_plan_runs_the_trueadapt_steps_through_the_family_registry(tmp_path, monkeypatch):
+    """The table plan's TrueAdapt steps (an evaluation, the limit validation, the time per decision) run the TrueAdapt
+    family's registry steps: pathrl-eval for the evaluation, pathrl.cli.family_step for the others; no tools/
+    script."""
+    from pathrl.families import family
+    from pathrl.repro import steps
+    from pathrl.repro.layout import PROFILES, Layout
+    from pathrl.repro.plan import build_plan
+
+    runs: list[list[str]] = []
+
+    def fake_sh(cmd: list[str], log: Path) -> None:
+        runs.append(cmd)
+        for out in (Path(a[4:]) for a in cmd if a.startswith("out=")):  # the evaluation's output directory
+            out.mkdir(parents=True)
+            (out / "metrics.json").write_text("{}")
+
+    monkeypatch.setattr(steps, "sh", fake_sh)
+    lay = Layout(tmp_path, ROOT / "models", tmp_path / "runs", ROOT / "datasets", tmp_path / "data")
+    plan = build_plan(PROFILES["quick"], lay, {"iiwa7_trueadapt_on_plate_reference", adapt.VALIDATION_ID})
+    for step in plan.steps:
+        step.run()
+    assert len(runs) == 3 and not any("tools/" in arg for cmd in runs for arg in cmd)
+    evaluation, validation, timing = runs
+    assert Path(evaluation[0]).name == "pathrl-eval"
+    assert "run_dir=models/iiwa7_trueadapt_on_plate_reference" in evaluation
+    for cmd, name in ((validation, "validate"), (timing, "timing")):
+        assert cmd[1:6] == ["-m", adapt.FAMILY_STEP, "trueadapt", name, cmd[5]], cmd
+        fn = family(cmd[3]).step(cmd[4])
+        assert (fn.__module__, fn.__name__) == ("pathrl.families.trueadapt", name)
+
+
+def test_family_step_validates_the_robot_of_the_run(tmp_path, capsys):
+    """`python -m pathrl.cli.family_step trueadapt validate` (what the plan runs): the iiwa7's limits, as
+    pathrl.eval.trueadapt_validation counts them; the result as JSON."""
+    from pathrl.cli.family_step import main
+    from pathrl.eval.trueadapt_validation import MODES, validate
+    from pathrl.limits.feasible import JointLimits
+    from pathrl.robot.external import load_robot_by_name
+
+    out = tmp_path / "v.json"
+    cmd = adapt.validation_command(ROOT, tmp_path, 20)
+    assert main([*cmd[3:5], str(ROOT / cmd[5]), str(out), "num_envs=20", "episodes=5", "seed=0"]) == 0
+    got = json.loads(out.read_text())
+    limits = JointLimits.from_robot(load_robot_by_name("iiwa7"))
+    want = [dataclasses.asdict(validate(limits, 20, 5, mode=m, seed=0)) for m in MODES]
+    strip = [{k: v for k, v in r.items() if k != "seconds"} for r in got]
+    assert strip == [{k: v for k, v in r.items() if k != "seconds"} for r in json.loads(json.dumps(want))]
+    assert main(["trueadapt", "validate", str(ROOT / cmd[5]), str(out), "episodes=0"]) == 2
+    assert "episodes must be an integer >= 1" in capsys.readouterr().err
 
 def test_limit_counter_checks_every_setpoint_and_finds_violations():
     """The reference replayed on 4 committed trajectories: no violation of the robot's limits; against velocity

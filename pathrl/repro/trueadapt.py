@@ -1,12 +1,13 @@
 """The TrueAdapt paper's Table I (online adaptation of reference trajectories, ball on plate) as data and rendering.
 
 Each row is a setting of the paper; ``AdaptEval`` says which shipped policy (or the reference without adaptation, or
-a model-based controller) fills our cells, on which split and ball. An evaluation runs ``tools/trueadapt_eval.py``
-and writes ``results/raw/<id>/metrics.json``; the 10^5-trajectory limit validation (Sec. VI-D) runs
-``tools/trueadapt_validation.py`` into ``results/raw/trueadapt_validation.json``; the time per decision
-(``pathrl.eval.trueadapt_realtime``) goes into ``results/raw/trueadapt_realtime.json``. The paper's values are
-``pathrl/config/paper/trueadapt.yaml`` (:mod:`pathrl.config.paper`). Rendering is a pure function of those results.
-"""
+a model-based controller) fills our cells, on which split and ball. Every step goes through the TrueAdapt family's
+registry (:mod:`pathrl.families.trueadapt`): an evaluation is ``pathrl-eval`` of a model directory (the reference's:
+``models/iiwa7_trueadapt_<task>_reference``) into ``results/raw/<id>/metrics.json``; the 10^5-trajectory limit
+validation (Sec. VI-D) is its ``validate`` step into ``results/raw/trueadapt_validation.json``, the time per decision
+its ``timing`` step into ``results/raw/trueadapt_realtime.json`` (both run by :mod:`pathrl.cli.family_step`). The
+paper's values are ``pathrl/config/paper/trueadapt.yaml`` (:mod:`pathrl.config.paper`). Rendering is a pure function
+of those results."""
 
 from __future__ import annotations
 
@@ -21,9 +22,9 @@ from pathrl.config.paper import load as load_paper
 from pathrl.repro.tables import training_record
 
 __all__ = [
-    "AdaptEval", "AdaptRow", "COLUMNS", "EPISODES", "REALTIME_ID", "ROWS", "TRAIN_MISSING", "VALIDATION_ID", "collect",
-    "eval_command", "evaluations", "latex", "markdown", "method", "names", "ours", "paper", "realtime_command",
-    "seed_results", "seeds_markdown", "unavailable", "validation_command",
+    "AdaptEval", "AdaptRow", "COLUMNS", "EPISODES", "EVAL_ENVS", "FAMILY_STEP", "REALTIME_ID", "ROWS", "TRAIN_MISSING",
+    "VALIDATION_ID", "VALIDATION_RUN", "collect", "eval_command", "evaluations", "latex", "markdown", "method", "names",
+    "ours", "paper", "realtime_command", "seed_results", "seeds_markdown", "unavailable", "validation_command",
 ]
 
 ADAPT_TABLE = "trueadapt_table_I"
@@ -41,6 +42,12 @@ REALTIME_ID = "trueadapt_realtime"
 REALTIME_MODEL, REALTIME_DATA = "iiwa7_trueadapt_on_plate_distill_full", "trueadapt_on_plate"
 #: Evaluated trajectories: the committed test split's 1000 (the first 1000 of the train split for that row).
 EPISODES = 1000
+#: Envs an evaluation runs at a time.
+EVAL_ENVS = 250
+#: The run directory whose robot (iiwa7) the limit validation checks.
+VALIDATION_RUN = f"{ROBOT}_trueadapt_on_plate_reference"
+#: What runs a family's registry step that returns a result (``python -m``; :mod:`pathrl.cli.family_step`).
+FAMILY_STEP = "pathrl.cli.family_step"
 TRAIN_MISSING = ("not available: needs the uncommitted train split data/iiwa7/trueadapt_on_plate "
                  "(`pathrl-dataset generate robot=iiwa7 dataset=trueadapt_on_plate`)")
 
@@ -60,6 +67,12 @@ class AdaptEval:
     def name(self) -> str:
         """The name ``--only`` selects it by (the model, or ``iiwa7_trueadapt_<task>_reference``)."""
         return self.model or f"{ROBOT}_trueadapt_{self.task}_reference"
+
+    @property
+    def run(self) -> str:
+        """Its directory under ``models/``: the model's, or for the reference without adaptation the controller
+        ``reference`` on the task's experiment config (``models/iiwa7_trueadapt_<task>_reference``)."""
+        return self.name
 
     @property
     def id(self) -> str:
@@ -208,47 +221,49 @@ def _rel(p: Path, root: Path) -> str:
 
 
 def eval_command(e: AdaptEval, root: Path, raw: Path, episodes: int, reuse: bool = False) -> list[str] | None:
-    """Script and arguments (run with the project's Python in `root`) that evaluate `e` into
-    `raw`/<id>/metrics.json, or None when it is skipped: its model is not shipped, the train split it needs is not
-    on this machine, or (`reuse`) its result exists. Test splits come from ``datasets/`` (committed), the train
-    split from ``data/``; one PyBullet worker process (evaluations run side by side)."""
+    """The ``pathrl-eval`` command (run in `root`; the TrueAdapt family's ``evaluate``) of `e`'s model directory
+    into `raw`/<id>/metrics.json, or None when it is skipped: its model is not shipped, the train split it needs is
+    not on this machine, or (`reuse`) its result exists. Test splits come from ``datasets/`` (committed), the train
+    split from ``data/``; 250 envs at a time, one PyBullet worker process (evaluations run side by side)."""
     out = raw / e.id
     data = root / ("datasets" if e.split == "test" else "data")
     if unavailable(e, root / "models", data) is not None or (reuse and (out / "metrics.json").is_file()):
         return None
-    run = ["--run", _rel(root / "models" / e.model, root)] if e.model else ["--task", e.task]
-    return ["tools/trueadapt_eval.py", *run, "--dataset", _rel(data / ROBOT / e.dataset, root), "--split", e.split,
-            "--episodes", str(episodes), "--seed", "0", "--backend", e.backend, "--workers", "1", "--out",
-            _rel(out, root),
-            *(["--open-loop"] if e.open_loop else [])]
+    return ["pathrl-eval", f"run_dir={_rel(root / 'models' / e.run, root)}",
+            f"dataset.path={_rel(data / ROBOT / e.dataset, root)}", f"split={e.split}", f"episodes={episodes}",
+            "seed=0", f"backend={e.backend}", "workers=1", f"num_envs={EVAL_ENVS}", f"out={_rel(out, root)}",
+            *(["open_loop=true"] if e.open_loop else [])]
 
 
 def validation_command(root: Path, raw: Path, trajectories: int, reuse: bool = False) -> list[str] | None:
-    """Script and arguments (run in `root`) of the Sec. VI-D limit validation into
-    `raw`/trueadapt_validation.json, or None (`reuse` and the result exists)."""
+    """The command (run in `root`; ``python``: the project's) of the Sec. VI-D limit validation into
+    `raw`/trueadapt_validation.json: the TrueAdapt family's ``validate`` step of the iiwa7 (:data:`VALIDATION_RUN`'s
+    robot), `trajectories` trajectories of :data:`VALIDATION_STEPS` decision steps per mode; None (`reuse` and the
+    result exists)."""
     out = raw / f"{VALIDATION_ID}.json"
     if reuse and out.is_file():
         return None
-    return ["tools/trueadapt_validation.py", "--trajectories", str(trajectories), "--steps",
-            str(VALIDATION_STEPS), "--out", _rel(out, root)]
+    return ["python", "-m", FAMILY_STEP, "trueadapt", "validate", _rel(root / "models" / VALIDATION_RUN, root),
+            _rel(out, root), f"num_envs={trajectories}", f"episodes={VALIDATION_STEPS}", "seed=0"]
 
 
 def realtime_command(root: Path, raw: Path, models: Path, data: Path, decisions: int,
                      reuse: bool = False) -> list[str] | None:
-    """Module and arguments (run in `root`) of the time per decision into `raw`/trueadapt_realtime.json, or None
-    (`reuse` and the result exists, or the timed model is not shipped)."""
+    """The command (run in `root`) of the time per decision into `raw`/trueadapt_realtime.json: the TrueAdapt
+    family's ``timing`` step of :data:`REALTIME_MODEL` on its test split, `decisions` decisions; None (`reuse` and
+    the result exists, or the timed model is not shipped)."""
     out = raw / f"{REALTIME_ID}.json"
     if (reuse and out.is_file()) or not (models / REALTIME_MODEL / "config.yaml").is_file():
         return None
-    return ["-m", "pathrl.eval.trueadapt_realtime", _rel(models / REALTIME_MODEL, root), _rel(out, root), "--dataset",
-            _rel(data / ROBOT / REALTIME_DATA, root), "--decisions", str(decisions)]
+    return ["python", "-m", FAMILY_STEP, "trueadapt", "timing", _rel(models / REALTIME_MODEL, root), _rel(out, root),
+            f"dataset_path={_rel(data / ROBOT / REALTIME_DATA, root)}", f"episodes={decisions}"]
 
 
 def unavailable(e: AdaptEval, models: Path, data: Path) -> str | None:
     """Why `e` is not evaluated here (its model is not shipped, or it needs the uncommitted train split and
     `data` lacks it), or None. A missing committed test split is no reason: the evaluation fails loudly."""
-    if e.model is not None and not (models / e.model / "config.yaml").is_file():
-        return f"{models / e.model} not shipped"
+    if not (models / e.run / "config.yaml").is_file():
+        return f"{models / e.run} not shipped"
     if e.split == "train" and not (data / ROBOT / e.dataset / "train.npz").is_file():
         return TRAIN_MISSING
     return None
