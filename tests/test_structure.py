@@ -124,6 +124,7 @@ LAYERS: list[tuple[str, ...]] = [
     ("pathrl.industrial", "pathrl.repro"),  # the industrial controller; the paper's tables from results
     ("pathrl.viz",),  # viewers (rerun) of runs, evaluations and recordings
     ("pathrl.families",),  # the family registry: each task family's env, evaluation, recording, viewer, tables
+    ("pathrl.bench",),  # the benchmarks of `make bench` (a family's realtime timing through the registry)
     ("pathrl.cli",),  # the command-line front doors (Hydra)
 ]
 

@@ -2,7 +2,8 @@
 
 On the shared 2-core reference machine the same code runs 30-40 % faster or slower from one process to the
 next, so two `make bench` runs cannot resolve a 20 % change. This script imports the `pathrl` of each
-checkout in turn (purging the other from ``sys.modules``), steps `tools/bench.py`'s env (synthetic paths,
+checkout in turn (purging the other from ``sys.modules``), steps the benchmark env (``pathrl.bench.env.make_env``,
+or ``make_env`` of `tools/bench.py` in a checkout from before ``pathrl/bench/``; synthetic paths,
 random actions, 4096 envs, compiled limit kernels, one thread) and reports CPU-time rates per repetition:
 
     python tools/lab/bench_ab.py --base /path/to/other/checkout [--robot iiwa7] [--reps 4]
@@ -26,15 +27,18 @@ HERE = Path(__file__).resolve().parents[2]
 
 
 def _load(root: Path, roots: list[Path]):
-    """`tools/bench.py` of `root` with that checkout's `pathrl` imported."""
+    """The module with the benchmark env of `root` (``pathrl.bench.env``, or an older checkout's `tools/bench.py`)
+    with that checkout's `pathrl` imported."""
     for name in [m for m in sys.modules if m == "pathrl" or m.startswith("pathrl.") or m == "bench"]:
         del sys.modules[name]
     others = {str(r) for r in roots} | {str(r / "tools") for r in roots}
     sys.path[:] = [p for p in sys.path if p not in others]
     sys.path[:0] = [str(root), str(root / "tools")]
-    import bench
+    import importlib
 
-    return bench
+    if (root / "pathrl" / "bench" / "env.py").is_file():
+        return importlib.import_module("pathrl.bench.env")
+    return importlib.import_module("bench")
 
 
 def rate(bench, robot: str, steps: int, warmup: int = 30) -> float:
