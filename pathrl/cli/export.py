@@ -85,7 +85,8 @@ def _main(argv: list[str]) -> None:
     if args["dataset"]["path"] is None and not Path(ds).is_dir():
         ds = str(Path("datasets") / robot.name / cfg["dataset"]["name"])
     try:
-        paths = load_pathset(ds, "test", KnotStrategy.from_cfg(cfg["knots"]), robot=robot)
+        paths = load_pathset(ds, "test", KnotStrategy.from_cfg(cfg["knots"]), robot=robot,
+                             out_of_limits=cfg["dataset"].get("out_of_limits", "refuse"))  # as the run was trained
     except (DatasetError, OSError) as exc:
         raise UserError(str(exc).splitlines()[0] if str(exc) else repr(exc)) from None
     env_cfg = replace(TrackingEnvCfg.from_run(cfg, num_envs=min(8, paths.num_paths), seed=0, knot_gap_norm=gap),

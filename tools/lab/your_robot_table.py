@@ -41,9 +41,9 @@ def rows(folder: Path) -> list[dict[str, float | str | int]]:
 def markdown(rs: list[dict[str, float | str | int]]) -> str:
     """The table with the bars beside it."""
     lines = ["# Students of new robots against TOPP-RA", "",
-             "Written by `tools/lab/your_robot_table.py` from the files beside it. The Table I recipe "
-             "(`+experiment=iiwa7_random_track_distill`, DAgger from the law tracker) trained on each robot's "
-             "generated paths (*trained on*: `pathrl-dataset generate robot=<robot> dataset=<it>`, seed 0), evaluated "
+             "Written by `tools/lab/your_robot_table.py` from the files beside it. The student recipe "
+             "(`+experiment=robot_track_distill`, DAgger from the law tracker) trained on each robot's "
+             "generated paths (*trained on*: `pathrl-dataset generate robot=<robot> dataset=<it>`), evaluated "
              "on the 1200 paper segments of the test split of its `dataset=random` paths (deterministic, 240 Hz limit "
              "check) and TOPP-RA on the same segments. "
              f"Bars: <= {BAR_RATIO}x TOPP-RA, <= {BAR_CM} cm mean deviation, trained in <= {BAR_MIN:.0f} min.", "",
