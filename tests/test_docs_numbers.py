@@ -1,4 +1,4 @@
-"""Every number the README's headline section and `docs/results.md` state has a receipt: a committed file holding
+"""Every number the README and `docs/results.md` state has a receipt: a committed file holding
 it, within the rounding the text shows.
 
 Receipts: `results/tables.csv` (ours and the paper's value of every table cell, written by `make reproduce-tables`),
@@ -79,6 +79,13 @@ def raw(evaluation: str, key: str, scale: float = 1.0) -> Source:
 BALL_CURVE = "results/ball_balancing_from_scratch/iiwa7_ball_balancing_reward_scratch_seed0.json"
 
 
+
+def _robot_joints(name: str) -> list:
+    """The joints of conf/robot/<name>.yaml."""
+    import yaml
+
+    return yaml.safe_load((ROOT / "pathrl" / "conf" / "robot" / f"{name}.yaml").read_text())["joints"]
+
 def rcp(receipt: str, key: str) -> Source:
     """A metric of results/receipts/<receipt>.json."""
     return lambda: float(_json(f"results/receipts/{receipt}.json")["metrics"][key])
@@ -150,6 +157,23 @@ README = "README.md"
 RES = "docs/results.md"
 
 RECEIPTS: list[Receipt] = [
+    # README.md, above the headline
+    R(README, "chooses, every 0.1 s, an acceleration", cfg("iiwa7_random", "env.dt")),
+    R(README, "(IROS 2022)", const(2022, "the paper's venue and year")),
+    R(README, "KUKA iiwa 7 (7 joints), ARMAR-6 (17), ARMAR-4 (18 upper body, 30 with legs)",
+      const(7, "the robot's model name"), derived(lambda: len(_robot_joints("iiwa7")), "iiwa7 joints"),
+      derived(lambda: len(_robot_joints("armar6")), "ARMAR-6 joints"),
+      derived(lambda: len(_robot_joints("armar4")), "ARMAR-4 upper-body joints"),
+      derived(lambda: len(_robot_joints("armar4_legs")), "ARMAR-4 joints with legs")),
+    R(README, "at the 240 Hz control rate", cfg("iiwa7_random", "env.control_rate")),
+    R(README, "Python >= 3.11", derived(lambda: float(re.search(r'requires-python = ">=(\d+\.\d+)"',
+                                                              (ROOT / "pyproject.toml").read_text())[1]),
+                                        "pyproject.toml's requires-python")),
+    R(README, "torch 2.13.0 (CPU build)", derived(lambda: float(re.search(r'"torch==(\d+\.\d+)\.\d+"',
+                                                                  (ROOT / "pyproject.toml").read_text())[1]),
+                                            "pyproject.toml's torch pin")),
+    R(README, "TEST_WORKERS=0: one", const(0, "a setting: no xdist workers")),
+    R(README, "--worst 5 --spawn", const(5, "an example argument")),
     # README.md, "Headline result"
     R(README, "iiwa7 random, 1200 paper-protocol segments", raw("iiwa7_random_track_distill", "episodes")),
     R(README, "in 2 min to the paper's quality and 25 min in all",
@@ -672,7 +696,7 @@ RECEIPTS += [
 # -- checking -------------------------------------------------------------------------------------------------------
 
 # the part of each page whose numbers need receipts
-SECTIONS = {README: ("## Headline result", "## Where results live"), RES: ("", None)}
+SECTIONS = {README: ("", None), RES: ("", None)}
 
 NUMBER = re.compile(r"(?<![\w.])(?<![A-Za-z]-)[-+]?\d+(?:\.\d+)?(?![\w.]*[A-Za-wyz_])")
 
