@@ -11,6 +11,7 @@ import pytest
 import torch
 
 from pathrl.repro import trueadapt as adapt
+from pathrl.repro import trueadapt_findings as findings
 
 ROOT = Path(__file__).resolve().parents[1]
 REF = "iiwa7_trueadapt_on_plate_reference_in_pybullet"
@@ -219,16 +220,16 @@ def test_every_seed_of_the_from_scratch_runs_and_the_method_column(tmp_path):
 
 def test_findings_class_the_paper_and_ours_the_same_way():
     # ratio classes: success fails < 0.25 <= partly < 0.9 <= keeps; a penalised quantity rises > 2x
-    assert [adapt.outcome(r, "success_pct") for r in (0.1, 0.25, 0.89, 0.9, 1.2)] == [
+    assert [findings.outcome(r, "success_pct") for r in (0.1, 0.25, 0.89, 0.9, 1.2)] == [
         "fails", "partly", "partly", "keeps", "keeps"]
-    assert [adapt.outcome(r, "jerk_pct") for r in (2.0, 2.01)] == ["stays", "rises"]
+    assert [findings.outcome(r, "jerk_pct") for r in (2.0, 2.01)] == ["stays", "rises"]
     scratch = {"success": 0.99, "fraction": 1.0, "offset": 0.04, "acc": 0.03, "jerk": 0.01, "episodes": 1000}
     no_pos = {**scratch, "success": 0.30}  # 30 / 99 = 0.30: partly, where the paper's 0.1 / 89.6 fails
     no_jerk = {**scratch, "success": 0.98, "jerk": 0.05}  # jerk 5 / 1 = 5x: rises, as the paper's 18.1 / 3.7
     results = {"trueadapt": {"iiwa7_trueadapt_on_plate_ppo_scratch_in_pybullet": scratch,
                              "iiwa7_trueadapt_on_plate_ppo_scratch_no_position_in_pybullet": no_pos,
                              "iiwa7_trueadapt_on_plate_ppo_scratch_no_jerk_penalty_in_pybullet": no_jerk}}
-    md = adapt.findings_markdown(results)
+    md = findings.markdown(results)
     pos = next(ln for ln in md if ln.startswith("| on plate: state without current position |"))
     assert pos == ("| on plate: state without current position | success | 0.1 / 89.6 (fails) | 30.0 / 99.0 (partly) "
                    "| **no** | – | – |")

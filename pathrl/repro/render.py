@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from pathrl.repro import trueadapt
+from pathrl.repro import trueadapt, trueadapt_findings
 from pathrl.repro.tables import (
     AUTHORS_BUDGETS,
     PAPER_TABLE,
@@ -311,7 +311,7 @@ def render_markdown(results: dict[str, Any], paper: dict[str, Any], profile: str
     lines += [""] + body
     csv_rows += rows
     body, rows = trueadapt.markdown(results)
-    lines += [""] + body
+    lines += [""] + body + trueadapt_findings.markdown(results)
     csv_rows += rows
     training = _training(results)
     if training:

@@ -24,7 +24,8 @@ from pathrl.repro.tables import training_record
 __all__ = [
     "AdaptEval", "AdaptRow", "COLUMNS", "EPISODES", "EVAL_ENVS", "FAMILY_STEP", "REALTIME_ID", "ROWS", "TRAIN_MISSING",
     "VALIDATION_ID", "VALIDATION_RUN", "collect", "eval_command", "evaluations", "latex", "markdown", "method", "names",
-    "ours", "paper", "realtime_command", "seed_results", "seeds_markdown", "unavailable", "validation_command",
+    "ours", "paper", "realtime_command", "row_values", "seed_results", "seeds_markdown", "unavailable",
+    "validation_command",
 ]
 
 ADAPT_TABLE = "trueadapt_table_I"
@@ -320,7 +321,7 @@ def _cell(value: float | None, paper_value: float | None, task: str, column: str
     return f"**{_fmt(value)}**" if paper_value is None else f"**{_fmt(value)}** / {_fmt(paper_value)}"
 
 
-def _row_values(results: dict[str, Any], row: AdaptRow) -> tuple[dict[str, Any] | None, dict[str, float | None]]:
+def row_values(results: dict[str, Any], row: AdaptRow) -> tuple[dict[str, Any] | None, dict[str, float | None]]:
     """(raw result or None, the paper's values by column) of a row."""
     p = paper()
     pv = dict(zip(p["columns"], p["rows"].get(row.paper_key, [None] * len(p["columns"])), strict=True))
@@ -424,95 +425,6 @@ def seeds_markdown(seeds: dict[str, dict[int, dict[str, Any]]]) -> list[str]:
     return lines
 
 
-@dataclass(frozen=True)
-class Finding:
-    """One of the paper's on-plate findings: row `key`'s `column` against the full policy's (the ratio ablation / full
-    classed by :func:`outcome`), checked on our rows trained from scratch (`scratch`, against SCRATCH) and from a
-    teacher (`teacher`, against `teacher_full`); None: no such row of ours."""
-
-    key: str
-    column: str
-    scratch: str | None
-    teacher: str | None
-    teacher_full: str = "on_plate/test_set"
-
-
-#: The findings, in the table's order: success for the state and open-loop ablations, the penalised quantity (and
-#: success) for the penalty ablations.
-FINDINGS: tuple[Finding, ...] = (
-    Finding("on_plate/open_loop_evaluation", "success_pct", "on_plate/open_loop_evaluation_scratch",
-            "on_plate/open_loop_evaluation"),
-    Finding("on_plate/open_loop_training", "success_pct", None, "on_plate/open_loop_training"),
-    Finding("on_plate/no_current_position", "success_pct", "on_plate/no_current_position_scratch",
-            "on_plate/no_current_position"),
-    Finding("on_plate/no_current_velocity", "success_pct", "on_plate/no_current_velocity_scratch",
-            "on_plate/no_current_velocity"),
-    Finding("on_plate/no_current_acceleration", "success_pct", "on_plate/no_current_acceleration_scratch",
-            "on_plate/no_current_acceleration"),
-    Finding("on_plate/no_following_positions", "success_pct", "on_plate/no_following_positions_scratch",
-            "on_plate/no_following_positions"),
-    Finding("on_plate/ten_following_positions", "success_pct", None, "on_plate/ten_following_positions"),
-    Finding("on_plate/no_jerk_penalty", "success_pct", "on_plate/no_jerk_penalty_scratch",
-            "on_plate/no_jerk_penalty", "on_plate/test_set_ppo"),
-    Finding("on_plate/no_jerk_penalty", "jerk_pct", "on_plate/no_jerk_penalty_scratch", "on_plate/no_jerk_penalty",
-            "on_plate/test_set_ppo"),
-    Finding("on_plate/no_acceleration_penalty", "success_pct", "on_plate/no_acceleration_penalty_scratch",
-            "on_plate/no_acceleration_penalty", "on_plate/test_set_ppo"),
-    Finding("on_plate/no_acceleration_penalty", "acc_pct", "on_plate/no_acceleration_penalty_scratch",
-            "on_plate/no_acceleration_penalty", "on_plate/test_set_ppo"),
-)
-
-
-def outcome(ratio: float, column: str) -> str:
-    """The class of an ablation's value over the full policy's: success ``fails`` (< 0.25), ``partly`` (< 0.9) or
-    ``keeps``; a penalised quantity (|acc|, |jerk|) ``rises`` (> 2x) or ``stays``."""
-    if column != "success_pct":
-        return "rises" if ratio > 2.0 else "stays"
-    return "fails" if ratio < 0.25 else "partly" if ratio < 0.9 else "keeps"
-
-
-def _ours_ratio(results: dict[str, Any], key: str | None, full: str, column: str) -> tuple[float, float] | None:
-    """(ablation, full) values of ours for row keys `key` and `full`, or None if either has no result."""
-    rows = {r.key: r for r in ROWS}
-    if key is None:
-        return None
-    a, b = (ours(_row_values(results, rows[k])[0], column) for k in (key, full))
-    return None if a is None or b is None or b == 0 else (a, b)
-
-
-def _finding_cells(pair: tuple[float, float] | None, column: str, paper_class: str) -> list[str]:
-    """'value / full (class)' and whether the class is the paper's, or dashes."""
-    if pair is None:
-        return ["–", "–"]
-    cls = outcome(pair[0] / pair[1], column)
-    return [f"{pair[0]:.1f} / {pair[1]:.1f} ({cls})", "yes" if cls == paper_class else "**no**"]
-
-
-def findings_markdown(results: dict[str, Any]) -> list[str]:
-    """Which of the paper's on-plate findings our rows reproduce, from scratch and from a teacher: the ablation's value
-    over the full policy's, classed the same way for the paper and for us."""
-    p = paper()
-    idx = {c: i for i, c in enumerate(p["columns"])}
-    names = dict(zip(COLUMNS, ("success", "fraction", "error distance", "\\|acc\\|", "\\|jerk\\|"), strict=True))
-    lines = ["", "Which of the paper's on-plate findings hold here. Each cell: the ablation's value / the full "
-             "policy's (%), and its class: success *fails* below 0.25x the full policy's, *partly* below 0.9x, else "
-             "*keeps*; a penalised quantity *rises* above 2x, else *stays*. The full policies: the paper's; ours from "
-             "scratch (`iiwa7_trueadapt_on_plate_ppo_scratch`, seed 0); ours from a teacher (the distilled policy; for "
-             "the penalties the distilled policy + PPO, whose runs drop the penalty). Same class as the paper: *yes*.",
-             "", "| the paper's setting | value | paper | from scratch | same | from a teacher | same |",
-             "|---|---|---|---|---|---|---|"]
-    for f in FINDINGS:
-        full = p["rows"]["on_plate/test_set"][idx[f.column]]
-        value = p["rows"][f.key][idx[f.column]]
-        cls = outcome(value / full, f.column)
-        setting = next(r.setting for r in ROWS if r.key == f.key)
-        cells = (_finding_cells(_ours_ratio(results, f.scratch, "on_plate/test_set_scratch", f.column), f.column, cls)
-                 + _finding_cells(_ours_ratio(results, f.teacher, f.teacher_full, f.column), f.column, cls))
-        lines.append(f"| {setting} | {names[f.column]} | {value:.1f} / {full:.1f} ({cls}) | " + " | ".join(cells)
-                     + " |")
-    return lines
-
-
 def markdown(results: dict[str, Any]) -> tuple[list[str], list[list[str]]]:
     """The table's Markdown lines and CSV rows (table, row, metric, ours, paper)."""
     lines = ["## TrueAdapt Table I: online adaptation of reference trajectories (iiwa7, ball on plate, PyBullet)",
@@ -521,7 +433,7 @@ def markdown(results: dict[str, Any]) -> tuple[list[str], list[list[str]]]:
              "|---|---|---|" + "---|" * (len(HEADERS) + 3)]
     csv_rows: list[list[str]] = []
     for row in ROWS:
-        m, pv = _row_values(results, row)
+        m, pv = row_values(results, row)
         task = row.key.split("/")[0]
         what = row.ours
         if m is None and row.evaluation is not None and row.evaluation.split == "train":
@@ -539,7 +451,6 @@ def markdown(results: dict[str, Any]) -> tuple[list[str], list[list[str]]]:
     v = results.get("trueadapt_validation")
     rt = results.get(REALTIME_ID)
     lines += seeds_markdown(results.get("trueadapt_seeds") or {})
-    lines += findings_markdown(results)
     lines += ["", _validation_line(v), "", _realtime_line(rt)]
     if rt:
         csv_rows.append([ADAPT_TABLE, "realtime", "valid_range_ms_max", f"{rt['valid_range_ms_max']:.6g}", "0.9"])
@@ -555,7 +466,7 @@ def latex(results: dict[str, Any]) -> list[str]:
            r"\begin{tabular}{l" + "r" * len(COLUMNS) + "}", r"\toprule",
            "setting & " + " & ".join(c.replace("_", r"\_") for c in COLUMNS) + r" \\", r"\midrule"]
     for row in ROWS:
-        m, pv = _row_values(results, row)
+        m, pv = row_values(results, row)
         cells = [f"{_fmt(ours(m, c)).replace('–', '--')} ({_fmt(pv[c]).replace('–', '--')})" for c in COLUMNS]
         out.append(row.key.replace("_", r"\_") + " & " + " & ".join(cells) + r" \\")
     return [*out, r"\bottomrule", r"\end{tabular}", ""]
