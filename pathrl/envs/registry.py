@@ -58,6 +58,7 @@ class EnvRequest:
     robot: RobotSpec | None = None  # the loaded robot (None: loaded from the config)
     backend: str | None = None  # feedback simulator instead of task.backend (analytic | pybullet)
     open_loop: bool = False  # the task's sensor keeps its first value of each episode
+    reward: bool = True  # False: no reward terms (a follower or an export computes no reward; tracking tasks)
     overrides: tuple[tuple[str, Any], ...] = ()  # env cfg fields to replace (e.g. EVAL_ENV)
 
 
@@ -141,7 +142,8 @@ def _build_tracking(cfg: dict[str, Any], req: EnvRequest):
             raise ValueError("open_loop=true: the run has no feedback task to freeze (give task=...)")
         feedback = FrozenSensor(feedback)
     try:
-        return PathTrackingEnv(env_cfg, robot, paths, build_reward_terms(cfg["reward"]["terms"]), feedback, fk)
+        terms = build_reward_terms(cfg["reward"]["terms"]) if req.reward else []
+        return PathTrackingEnv(env_cfg, robot, paths, terms, feedback, fk)
     except BaseException:
         if feedback is not None:  # simulator processes
             feedback.close()
@@ -159,6 +161,8 @@ def _build_trueadapt(cfg: dict[str, Any], req: EnvRequest):
 
     if req.paths is not None:
         raise ValueError("a TrueAdapt task runs on trajectories, not on a path bank")
+    if not req.reward:
+        raise ValueError("a TrueAdapt env always computes its reward (its task term decides failures)")
     if req.backend is not None:
         cfg = {**cfg, "task": {**cfg["task"], "backend": req.backend}}
     overrides = dict(req.overrides)
