@@ -1,16 +1,20 @@
 """Dataclass schemas of every config group. Hydra validates composed YAML against these.
 
-No logic here: the schema names the keys and their types; defaults live in ``conf/``. The ``env`` group's schema is
-the env's own settings class (:class:`pathrl.envs.tracking_cfg.EnvSettings`, defaults there), also used at run time,
-so the schemas sit above the env (the rest of config support, below every layer: :mod:`pathrl.config`).
+The schema names the keys and their types; defaults live in ``conf/``. The ``env`` group's schema is the env's own
+settings class (:class:`pathrl.envs.tracking_cfg.EnvSettings`, defaults there), also used at run time, so the schemas
+sit above the env (the rest of config support, below every layer: :mod:`pathrl.config`). A resolved ``pathrl-train``
+config becomes its typed object once (:func:`train_app_cfg`; the CLI: ``OmegaConf.to_object``), and goes back to the
+plain dict it was composed as (:func:`config_dict`: the saved ``config.yaml``, the dict-reading env registry).
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from omegaconf import MISSING
+from omegaconf import MISSING, OmegaConf
+from omegaconf.errors import OmegaConfBaseException
 
 from pathrl.config.migrate import CONFIG_VERSION
 from pathrl.envs.path_change_cfg import PathChangeCfg
@@ -19,7 +23,7 @@ from pathrl.envs.tracking_cfg import EnvSettings
 __all__ = [
     "CriticWarmupCfg", "DatasetAppCfg", "DatasetCfg", "EvalAppCfg", "EvalDatasetCfg", "ExportAppCfg",
     "ExportDatasetCfg", "KnotsCfg", "LrDecayCfg", "RewardCfg", "RobotCfg", "StdAnnealCfg", "TaskCfg", "TcpCfg",
-    "ToppraAppCfg", "TrainAppCfg", "WorkspaceCfg",
+    "ToppraAppCfg", "TrainAppCfg", "WorkspaceCfg", "config_dict", "train_app_cfg",
 ]
 
 
@@ -249,3 +253,21 @@ class TrainAppCfg:
     # bound, seed}; pathrl.train.bias_search); empty: none
     bias_search: dict[str, Any] = field(default_factory=dict)
     lr_decay: LrDecayCfg = field(default_factory=LrDecayCfg)  # a falling learning rate (lr_decay.final=1e-5)
+
+
+def train_app_cfg(values: Mapping[str, Any]) -> TrainAppCfg:
+    """The typed ``pathrl-train`` config of a resolved run config (a mapping with the schema's keys), each value
+    converted to its field's type; a one-line ValueError for a value that does not convert (``iterations: abc``)."""
+    node = OmegaConf.structured(TrainAppCfg)
+    OmegaConf.set_readonly(node.env, None)  # the env group's frozen settings class: filled in here
+    try:
+        return OmegaConf.to_object(OmegaConf.merge(node, dict(values)))  # type: ignore[return-value]
+    except OmegaConfBaseException as exc:
+        key = getattr(exc, "full_key", None)
+        raise ValueError(f"{key + ': ' if key else ''}{str(exc).strip().splitlines()[0]}") from None
+
+
+def config_dict(cfg: Any) -> dict[str, Any]:
+    """A typed config (:class:`TrainAppCfg`) as the plain dict Hydra composes and a run saves (``config.yaml``): the
+    schema's key order, free-form groups (``agent``, ``teacher``, ...) as given."""
+    return OmegaConf.to_container(OmegaConf.structured(cfg), resolve=True)  # type: ignore[return-value]

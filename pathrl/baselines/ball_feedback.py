@@ -149,7 +149,7 @@ class TrayController:
         if len(env.path_index) != env.robot.dof:
             raise ValueError(f"TrayController needs every joint on the path; {env.robot.name} has free joints")
         self.env, self.cfg = env, cfg or TrayControllerCfg()
-        self.fk = ForwardKinematics(env.robot, device=env.device)
+        self.fk = env.fk  # the env's kinematics (its ball's)
         n, d = env.num_envs, env.robot.dof
         f64 = dict(dtype=torch.float64, device=env.device)
         self.duration = torch.ones(n, **f64)

@@ -146,7 +146,7 @@ class AdaptTrayController:
         if not hasattr(env, "reference_actions") or not hasattr(env, "bank"):
             raise ValueError("controller trueadapt_tray: needs a trajectory-adaptation env (task=trueadapt_*)")
         self.env, self.cfg = env, cfg or AdaptTrayCfg()
-        self.fk = ForwardKinematics(env.robot, device=env.device)
+        self.fk = env.fk  # the env's kinematics (its ball's)
         # constant tables live in a dict: ControllerObs snapshots only the controller's tensor attributes
         self.tables = {"vel": reference_velocities(env.bank.acc, env.cfg.dt)}
         self.correction = torch.zeros(env.num_envs, env.robot.dof, dtype=torch.float64, device=env.device)

@@ -12,7 +12,6 @@ The arguments are Hydra overrides of ``conf/export_app.yaml`` (schema :class:`pa
 
 from __future__ import annotations
 
-from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -53,8 +52,7 @@ def _config(argv: list[str]) -> dict[str, Any]:
 def _main(argv: list[str]) -> None:
     from pathrl.dataset.io import DatasetError, load_pathset
     from pathrl.deploy.export import export_policy
-    from pathrl.envs.registry import EVAL_ENV, get_task
-    from pathrl.envs.tracking_cfg import TrackingEnvCfg
+    from pathrl.envs.registry import EnvRequest, get_task
     from pathrl.paths.knots import KnotStrategy
     from pathrl.robot.model import load_robot
     from pathrl.runs import RunError, load_run, policy_scale
@@ -89,10 +87,9 @@ def _main(argv: list[str]) -> None:
                              out_of_limits=cfg["dataset"].get("out_of_limits", "refuse"))  # as the run was trained
     except (DatasetError, OSError) as exc:
         raise UserError(str(exc).splitlines()[0] if str(exc) else repr(exc)) from None
-    env_cfg = replace(TrackingEnvCfg.from_run(cfg, num_envs=min(8, paths.num_paths), seed=0, knot_gap_norm=gap),
-                      **EVAL_ENV)
+    request = EnvRequest("test", num_envs=min(8, paths.num_paths), seed=0, knot_gap_norm=gap, paths=paths, robot=robot)
     try:
-        report = export_policy(cfg, ckpt, paths, env_cfg, robot, out, count)
+        report = export_policy(cfg, ckpt, request, out, count)
     except ValueError as exc:
         raise UserError(str(exc)) from None
     worst = max(report["max_abs_diff_torchscript"], report["max_abs_diff_onnx"])

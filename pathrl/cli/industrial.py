@@ -25,11 +25,15 @@ import sys
 import time
 from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from pathrl.cli.common import UserError, compose, output_dir, output_file, run_cli, to_container
 from pathrl.storage import atomic_write
+
+if TYPE_CHECKING:
+    from pathrl.industrial.config import IndustrialAppCfg
 
 __all__ = ["OUTPUT_KEYS", "RECORD_KEYS", "main"]
 
@@ -42,20 +46,21 @@ USAGE = "usage: pathrl-industrial {table2,speed,sweep,train,table4,record,valida
 RECORD_KEYS = ("traj", "method", "out")
 
 
-def _setup(overrides: Sequence[str]):
-    from pathrl.industrial.config import IndustrialAppCfg, build
+def _setup(overrides: Sequence[str]) -> tuple[IndustrialAppCfg, dict[str, Any], list]:
+    """(the typed app config, the same as the composed dict (what a training run records), the evaluation rows)."""
+    from pathrl.industrial.config import IndustrialAppCfg, app_cfg
     from pathrl.industrial.experiments import select_targets
 
     bad = [o for o in overrides if "=" not in o]
     if bad:
         raise UserError(f"expected key=value overrides, got {bad[0]!r}; {USAGE}")
-    cfg = to_container(compose("industrial/app", overrides, IndustrialAppCfg))
+    raw = to_container(compose("industrial/app", overrides, IndustrialAppCfg))
     try:
-        params = build(cfg)
-        targets = select_targets(cfg["rows"])
+        app = app_cfg(raw)
+        targets = select_targets(app.rows)
     except (TypeError, ValueError) as exc:
         raise UserError(str(exc)) from None
-    return cfg, params, targets
+    return app, raw, targets
 
 
 def _policy(run_dir: str):
@@ -83,15 +88,16 @@ def _policy(run_dir: str):
     return (agent.act if clip == 1.0 else (lambda obs: clip * agent.act(obs))), "RL"
 
 
-def _train(cfg, controller, rl) -> None:
+def _train(app: IndustrialAppCfg, raw: dict[str, Any]) -> None:
+    """``train``: the TD3 policy of `app` into its run_dir (the run records the composed config `raw`)."""
     import torch
 
     from pathrl.industrial.rl_train import train
 
     torch.set_num_threads(1)
-    summary = train(Path(cfg["run_dir"]), rl, controller, cfg["waypoints"], cfg["zone"], bool(cfg["resume"]),
-                    config=cfg, progress=True)
-    print(f"trained {cfg['run_dir']}: {summary}")
+    summary = train(Path(app.run_dir), app.rl, app.controller, app.waypoints, app.zone, app.resume, config=raw,
+                    progress=True)
+    print(f"trained {app.run_dir}: {summary}")
 
 
 def _write(path: str, text: str) -> None:
@@ -116,11 +122,11 @@ def _main(argv: list[str]) -> None:
     from pathrl.industrial import experiments, tables
     from pathrl.industrial.iwa_env import IWASettings
 
-    cfg, (controller, mpgd, search, rl), targets = _setup(rest)
+    cfg, raw, targets = _setup(rest)
     if cmd == "train":
-        output_dir(cfg["run_dir"], "run_dir")
+        output_dir(cfg.run_dir, "run_dir")
     else:
-        output_file(cfg[OUTPUT_KEYS[cmd]], OUTPUT_KEYS[cmd])
+        output_file(getattr(cfg, OUTPUT_KEYS[cmd]), OUTPUT_KEYS[cmd])
     command = " ".join(["pathrl-industrial", *argv])
     note = ("Paper values: Wen et al., RobotStudio simulation of an ABB IRB 6640 (Table II/III); ours: the "
             "simulated controller of pathrl.industrial (a different controller, so compare trends, not digits). "
@@ -128,33 +134,34 @@ def _main(argv: list[str]) -> None:
     t0 = time.perf_counter()
     try:
         if cmd == "train":
-            _train(cfg, controller, rl)
+            _train(cfg, raw)
             return
+        controller, mpgd, k_max = cfg.controller, cfg.mpgd, cfg.rl.k_max
         if cmd == "table2":
-            policy, name = _policy(cfg["policy"])
-            iwa = IWASettings(cfg["waypoints"], cfg["zone"], rl.k_max)
-            rows = experiments.run_table2(targets, controller, mpgd, iwa, cfg["seed"], policy)
+            policy, name = _policy(cfg.policy)
+            iwa = IWASettings(cfg.waypoints, cfg.zone, k_max)
+            rows = experiments.run_table2(targets, controller, mpgd, iwa, cfg.seed, policy)
             text = tables.table2_markdown(rows, command, note, name)
-            if policy is not None and cfg["seed_runs"]:
-                text += _seed_summary(cfg, targets, controller, rl.k_max, rows)
-            out = cfg["out_table2"]
+            if policy is not None and cfg.seed_runs:
+                text += _seed_summary(cfg, targets, rows)
+            out = cfg.out_table2
         elif cmd == "speed":
-            policy, name = _policy(cfg["policy"])
-            iwa = IWASettings(cfg["waypoints"], cfg["zone"], rl.k_max)
-            rows = experiments.run_speed(targets, controller, mpgd, search, iwa, cfg["seed"], policy)
+            policy, name = _policy(cfg.policy)
+            iwa = IWASettings(cfg.waypoints, cfg.zone, k_max)
+            rows = experiments.run_speed(targets, controller, mpgd, cfg.search, iwa, cfg.seed, policy)
             text = tables.table3_markdown(rows, command, note, name if policy is not None else "MPGD")
-            out = cfg["out_speed"]
+            out = cfg.out_speed
         elif cmd == "table4":
-            text, out = _table4(cfg, targets, controller, rl.k_max, command, note), cfg["out_table4"]
+            text, out = _table4(cfg, targets, command, note), cfg.out_table4
         elif cmd == "validate":
-            text, out = _validate(cfg, controller, rl.k_max, command), cfg["out_validation"]
+            text, out = _validate(cfg, command), cfg.out_validation
         elif cmd == "timing":
-            text, out = _timing(cfg, targets, controller, mpgd, rl.k_max, command), cfg["out_timing"]
+            text, out = _timing(cfg, targets, command), cfg.out_timing
         else:
-            speeds = [float(v) for v in cfg["sweep_speeds"]]
-            errs = experiments.baseline_sweep(targets, speeds, controller, cfg["waypoints"], cfg["zone"])
+            speeds = [float(v) for v in cfg.sweep_speeds]
+            errs = experiments.baseline_sweep(targets, speeds, controller, cfg.waypoints, cfg.zone)
             text = experiments.sweep_markdown(targets, speeds, errs, command)
-            out = cfg["out_sweep"]
+            out = cfg.out_sweep
     except ValueError as exc:
         raise UserError(str(exc)) from None
     print(text)
@@ -162,12 +169,11 @@ def _main(argv: list[str]) -> None:
     print(f"{cmd} took {time.perf_counter() - t0:.1f} s")
 
 
-def _seed_summary(cfg, targets, controller, k_max: int, mpgd_rows) -> str:
+def _seed_summary(cfg: IndustrialAppCfg, targets, mpgd_rows) -> str:
     """The per-seed lines of ``seed_runs`` on the Table II rows, with mean and min-max over the seeds."""
     from pathrl.industrial import seeds
 
-    summaries = [seeds.summarise(run, seeds.run_policy_rows(targets, _policy(run)[0], controller, cfg["waypoints"],
-                                                          cfg["zone"], k_max), mpgd_rows) for run in cfg["seed_runs"]]
+    summaries = [seeds.summarise(run, _policy_rows(cfg, targets, run), mpgd_rows) for run in cfg.seed_runs]
     return "\n".join([
         "## Seeds of the policy's configuration", "",
         "The RL columns above are one shipped policy; every seed of its configuration (`seed_runs`) on the same "
@@ -175,17 +181,22 @@ def _seed_summary(cfg, targets, controller, k_max: int, mpgd_rows) -> str:
         *seeds.seed_table_markdown({"TD3 + PER": summaries}), ""])
 
 
-def _table4(cfg, targets, controller, k_max: int, command: str, note: str) -> str:
+def _policy_rows(cfg: IndustrialAppCfg, targets, run: str) -> list:
+    """The rows of `targets` optimised by the policy of run directory `run` (:func:`seeds.run_policy_rows`)."""
+    from pathrl.industrial import seeds
+
+    return seeds.run_policy_rows(targets, _policy(run)[0], cfg.controller, cfg.waypoints, cfg.zone, cfg.rl.k_max)
+
+
+def _table4(cfg: IndustrialAppCfg, targets, command: str, note: str) -> str:
     """Table IV: per row the first run of each variant; then every run's summary and mean / min-max per variant."""
     from pathrl.industrial import seeds, tables
 
     try:
-        variants = seeds.parse_runs(cfg["table4_runs"])
+        variants = seeds.parse_runs(cfg.table4_runs)
     except ValueError as exc:
         raise UserError(f"table4_runs: {exc}") from None
-    runs = {run: _policy(run)[0] for dirs in variants.values() for run in dirs}
-    results = {run: seeds.run_policy_rows(targets, policy, controller, cfg["waypoints"], cfg["zone"], k_max)
-               for run, policy in runs.items()}
+    results = {run: _policy_rows(cfg, targets, run) for dirs in variants.values() for run in dirs}
     first = {name: [(r.name, r.err_mm, r.itr) for r in results[dirs[0]]] for name, dirs in variants.items()}
     text = tables.table4_markdown(first, command, note)
     summaries = {name: [seeds.summarise(run, results[run]) for run in dirs] for name, dirs in variants.items()}
@@ -195,32 +206,31 @@ def _table4(cfg, targets, controller, k_max: int, command: str, note: str) -> st
         "over them:", "", *seeds.seed_table_markdown(summaries, with_ratios=False), ""])
 
 
-def _validate(cfg, controller, k_max: int, command: str) -> str:
+def _validate(cfg: IndustrialAppCfg, command: str) -> str:
     """Score the ``seed_runs`` on the validation set (:mod:`pathrl.industrial.seeds`)."""
     from pathrl.industrial import seeds
 
-    if not cfg["seed_runs"]:
+    if not cfg.seed_runs:
         raise UserError("validate: seed_runs is empty (give the run dirs to compare)")
     try:
-        targets = seeds.validation_targets(int(cfg["validation_n"]), int(cfg["validation_seed"]))
+        targets = seeds.validation_targets(int(cfg.validation_n), int(cfg.validation_seed))
     except ValueError as exc:
         raise UserError(str(exc)) from None
-    results = {run: seeds.run_policy_rows(targets, _policy(run)[0], controller, cfg["waypoints"], cfg["zone"], k_max)
-               for run in cfg["seed_runs"]}
-    return seeds.validation_markdown(results, k_max, command, int(cfg["validation_n"]), int(cfg["validation_seed"]))
+    results = {run: _policy_rows(cfg, targets, run) for run in cfg.seed_runs}
+    return seeds.validation_markdown(results, cfg.rl.k_max, command, int(cfg.validation_n), int(cfg.validation_seed))
 
 
-def _timing(cfg, targets, controller, mpgd, k_max: int, command: str) -> str:
+def _timing(cfg: IndustrialAppCfg, targets, command: str) -> str:
     """Per-iteration times of execution, measurement, MPGD and policy decisions, and the t_opt cost model."""
     import torch
 
     from pathrl.industrial import timing
 
-    if not cfg["policy"]:
+    if not cfg.policy:
         raise UserError("timing: needs policy=RUN_DIR (the policy whose decisions are timed)")
     torch.set_num_threads(1)
-    policy = _policy(cfg["policy"])[0]
-    rows = timing.time_rows(targets, controller, mpgd, policy, cfg["waypoints"], cfg["zone"], k_max, cfg["seed"])
+    policy = _policy(cfg.policy)[0]
+    rows = timing.time_rows(targets, cfg.controller, cfg.mpgd, policy, cfg.waypoints, cfg.zone, cfg.rl.k_max, cfg.seed)
     return timing.timing_markdown(rows, command)
 
 
@@ -245,13 +255,13 @@ def _record(argv: Sequence[str]) -> None:
     from pathrl.industrial.record import Optimiser, record_optimisation
 
     own, rest = _record_keys(argv)
-    cfg, (controller, mpgd, _, rl), _ = _setup(rest)
+    cfg, _, _ = _setup(rest)
     output_dir(own["out"], "out", ("industrial.mcap",))
     try:
         target = select_targets([own["traj"]])[0]
     except ValueError as exc:
         raise UserError(f"record: traj: {exc}") from None
-    run = cfg["policy"]
+    run = cfg.policy
     if own["method"] == "mpgd" and run:
         raise UserError("record: policy= is for method=rl (MPGD has no policy)")
     if own["method"] == "rl":
@@ -263,8 +273,8 @@ def _record(argv: Sequence[str]) -> None:
     policy, name = _policy(run) if own["method"] == "rl" else (None, "MPGD")
     try:
         out, result, kept = record_optimisation(
-            target, Optimiser(own["method"], mpgd, policy), controller, Path(own["out"]),
-            iwa=IWASettings(cfg["waypoints"], cfg["zone"], rl.k_max), seed=cfg["seed"],
+            target, Optimiser(own["method"], cfg.mpgd, policy), cfg.controller, Path(own["out"]),
+            iwa=IWASettings(cfg.waypoints, cfg.zone, cfg.rl.k_max), seed=cfg.seed,
             meta={"policy": run, "method_name": name, "command": " ".join(["pathrl-industrial", "record", *argv])})
     except ValueError as exc:
         raise UserError(f"record: {exc}") from None

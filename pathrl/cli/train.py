@@ -31,16 +31,16 @@ def _app(cfg: DictConfig) -> float | dict[str, str]:
     from pathrl.dataset.io import DatasetError
     from pathrl.train.runner import train
 
-    resolved = OmegaConf.to_container(cfg, resolve=True)
+    typed = OmegaConf.to_object(cfg)  # the schema's TrainAppCfg, read by attribute from here on (pathrl.schema)
     try:
-        summary = train(resolved, Path(cfg.run_dir), resume=bool(cfg.resume))
+        summary = train(typed, Path(typed.run_dir), resume=typed.resume)
     except (DatasetError, FileExistsError, ValueError) as exc:
         if HydraConfig.get().mode == RunMode.MULTIRUN:
             return {"error": str(exc)}  # recorded as failed (pathrl.cli.sweep_report); the other jobs still run
         print(f"error: {exc}", file=sys.stderr)
         raise SystemExit(2) from None
     print(f"done: {summary['iterations']} iterations, {summary['env_steps']:,} env steps, "
-          f"{summary['wall_time_s']:.0f} s -> {cfg.run_dir}")
+          f"{summary['wall_time_s']:.0f} s -> {typed.run_dir}")
     return float(summary["mean_reward"] or 0.0)
 
 

@@ -78,6 +78,8 @@ def config_version(cfg: Mapping[str, Any]) -> int:
 def _v0_to_v1(cfg: dict[str, Any]) -> None:
     """Version 0 -> 1: the task group of configs from before tasks, and every key of :data:`ADDED_KEYS`."""
     cfg["task"] = {**NO_TASK, **(cfg.get("task") or {})}
+    if "critic_warmup" in cfg and not cfg["critic_warmup"]:  # its first form, ``critic_warmup: 0``: no warm-up
+        del cfg["critic_warmup"]
     _fill(cfg, ADDED_KEYS)
 
 

@@ -17,9 +17,8 @@ import numpy as np
 import torch
 from rsl_rl.modules import MLP
 
-from pathrl.envs.rewards import build_reward_terms
+from pathrl.envs.registry import EVAL_ENV, EnvRequest, make_env
 from pathrl.envs.tracking import PathTrackingEnv
-from pathrl.paths.pathset import PathSet
 from pathrl.paths.segments import evaluation_plan
 from pathrl.runs import load_policy
 from pathrl.storage import atomic_write
@@ -62,9 +61,10 @@ def _atomic(path: Path, write) -> None:
     atomic_write(path, lambda tmp: write(str(tmp)))
 
 
-def export_policy(cfg: dict[str, Any], checkpoint: Path, paths: PathSet, env_cfg, robot, out_dir: Path,
+def export_policy(cfg: dict[str, Any], checkpoint: Path, request: EnvRequest, out_dir: Path,
                   observations: int = 1000) -> dict[str, Any]:
-    """Write ``actor.pt`` (TorchScript), ``actor.onnx`` and ``export.json`` (sizes and the check) to `out_dir`.
+    """Write ``actor.pt`` (TorchScript), ``actor.onnx`` and ``export.json`` (sizes and the check) to `out_dir`; the
+    observations the exports are checked on are recorded in the evaluation env of `cfg` that `request` asks for.
 
     Raises ValueError if an export differs from the PyTorch actor by more than EXPORT_ATOL.
     """
@@ -73,7 +73,7 @@ def export_policy(cfg: dict[str, Any], checkpoint: Path, paths: PathSet, env_cfg
     if cfg.get("residual"):
         raise ValueError("a residual policy acts through its controller, which has no TorchScript/ONNX form; "
                          "export exports whole policy networks")
-    env = PathTrackingEnv(env_cfg, robot, paths, build_reward_terms(cfg["reward"]["terms"]))
+    env = make_env(cfg, request, **EVAL_ENV)
     policy = load_policy(cfg, env, checkpoint)
     obs = record_observations(env, policy, observations)
     actor = float32_actor(policy)

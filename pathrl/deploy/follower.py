@@ -32,7 +32,7 @@ import torch
 
 from pathrl.dataset.io import OUT_OF_LIMITS, bounds_problem
 from pathrl.deploy.approach import Approach, plan_approach
-from pathrl.envs.registry import EVAL_ENV, get_task
+from pathrl.envs.registry import EVAL_ENV, EnvRequest, get_task, make_env
 from pathrl.envs.tracking import PathTrackingEnv
 from pathrl.envs.tracking_cfg import TrackingEnvCfg
 from pathrl.limits.braking import is_stopped
@@ -110,6 +110,7 @@ class Follower:
             raise FollowerError(f"the follower runs path-tracking policies; this one needs the {feedback} sensor")
         self.robot, self.cfg, self.checkpoint, self.out_of_limits = robot, cfg, checkpoint, out_of_limits
         self.knots = KnotStrategy.from_cfg(cfg["knots"])
+        self.knot_gap = knot_gap
         self.env_cfg = replace(TrackingEnvCfg.from_run(cfg, num_envs=1, seed=0, knot_gap_norm=knot_gap), **EVAL_ENV)
         self.env: PathTrackingEnv | None = None
         self.policy: torch.nn.Module | None = None
@@ -238,7 +239,9 @@ class Follower:
         """The one-env env on `paths` and the policy, or a FollowerError. A follower does not learn: its env computes
         no reward (the step's state, limits and observation do not depend on the reward terms)."""
         try:
-            env = PathTrackingEnv(self.env_cfg, self.robot, paths, [])
+            request = EnvRequest(num_envs=1, seed=0, knot_gap_norm=self.knot_gap, paths=paths, robot=self.robot,
+                                 reward=False)
+            env = make_env(self.cfg, request, **EVAL_ENV)
             return env, load_policy(self.cfg, env, self.checkpoint)
         except (RunError, KeyError, ValueError) as exc:
             raise FollowerError(f"{self.checkpoint}: {exc}") from None

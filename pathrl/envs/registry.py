@@ -27,6 +27,7 @@ from pathrl.envs.device import EVAL_DEVICE
 from pathrl.envs.rewards import build_reward_terms
 from pathrl.envs.tracking_cfg import TrackingEnvCfg
 from pathrl.paths.pathset import PathSet
+from pathrl.robot.kinematics import ForwardKinematics
 from pathrl.robot.model import RobotSpec, load_robot
 
 __all__ = ["EVAL_ENV", "FEEDBACKS", "FEEDBACK_BACKENDS", "TASKS", "EnvRequest", "Task", "check_task", "get_task",
@@ -57,6 +58,7 @@ class EnvRequest:
     robot: RobotSpec | None = None  # the loaded robot (None: loaded from the config)
     backend: str | None = None  # feedback simulator instead of task.backend (analytic | pybullet)
     open_loop: bool = False  # the task's sensor keeps its first value of each episode
+    reward: bool = True  # False: no reward terms (a follower or an export computes no reward; tracking tasks)
     overrides: tuple[tuple[str, Any], ...] = ()  # env cfg fields to replace (e.g. EVAL_ENV)
 
 
@@ -78,9 +80,10 @@ def task_cfg(cfg: dict[str, Any]) -> dict[str, Any]:
 
 
 def make_feedback(cfg: dict[str, Any], robot: RobotSpec, num_envs: int, seed: int, backend: str | None = None,
-                  device: str | None = None):
+                  device: str | None = None, fk: ForwardKinematics | None = None):
     """The feedback source of a config's task (None for plain tracking); `backend` overrides task.backend. `device`:
-    the env's (default: the config's); the analytic models are built there, PyBullet refuses any but the CPU."""
+    the env's (default: the config's); the analytic models are built there, PyBullet refuses any but the CPU. `fk`:
+    the env's forward kinematics, which the feedback shares (None: it builds its own)."""
     t = task_cfg(cfg)
     if t["feedback"] is None:
         return None
@@ -101,7 +104,7 @@ def make_feedback(cfg: dict[str, Any], robot: RobotSpec, num_envs: int, seed: in
         if backend == "analytic":  # the batched torch model (training); PyBullet is the reference (evaluation)
             from pathrl.sim.standing import AnalyticStanding
 
-            return AnalyticStanding(robot, num_envs, rate, seed=seed, device=device)
+            return AnalyticStanding(robot, num_envs, rate, seed=seed, device=device, fk=fk)
         if backend == "pybullet":
             from pathrl.sim.vec import PyBulletStanding
 
@@ -110,11 +113,11 @@ def make_feedback(cfg: dict[str, Any], robot: RobotSpec, num_envs: int, seed: in
     if backend == "analytic":
         from pathrl.sim.feedback import AnalyticBall
 
-        return AnalyticBall(robot, num_envs, rate, seed=seed, device=device, imu=bool(t["imu"]))
+        return AnalyticBall(robot, num_envs, rate, seed=seed, device=device, imu=bool(t["imu"]), fk=fk)
     if backend == "pybullet":
         from pathrl.sim.vec import PyBulletBall
 
-        return PyBulletBall(robot, num_envs, rate, seed=seed, workers=int(t["workers"]), imu=bool(t["imu"]))
+        return PyBulletBall(robot, num_envs, rate, seed=seed, workers=int(t["workers"]), imu=bool(t["imu"]), fk=fk)
     raise ValueError(f"task.backend: expected one of {list(FEEDBACK_BACKENDS)}, got {backend!r}")
 
 
@@ -131,13 +134,16 @@ def _build_tracking(cfg: dict[str, Any], req: EnvRequest):
         paths = load_pathset(req.dataset_path or cfg["dataset"]["path"], req.split, KnotStrategy.from_cfg(cfg["knots"]),
                              robot=robot, out_of_limits=str(cfg["dataset"].get("out_of_limits", "refuse")))
     env_cfg = replace(TrackingEnvCfg.from_run(cfg, req.num_envs, req.seed, req.knot_gap_norm), **dict(req.overrides))
-    feedback = make_feedback(cfg, robot, env_cfg.num_envs, env_cfg.seed, req.backend, device=env_cfg.device)
+    # the env's one kinematics object, shared with its feedback; without a feedback the env builds it when first used
+    fk = ForwardKinematics(robot, device=env_cfg.device) if task_cfg(cfg)["feedback"] is not None else None
+    feedback = make_feedback(cfg, robot, env_cfg.num_envs, env_cfg.seed, req.backend, device=env_cfg.device, fk=fk)
     if req.open_loop:
         if feedback is None:
             raise ValueError("open_loop=true: the run has no feedback task to freeze (give task=...)")
         feedback = FrozenSensor(feedback)
     try:
-        return PathTrackingEnv(env_cfg, robot, paths, build_reward_terms(cfg["reward"]["terms"]), feedback)
+        terms = build_reward_terms(cfg["reward"]["terms"]) if req.reward else []
+        return PathTrackingEnv(env_cfg, robot, paths, terms, feedback, fk)
     except BaseException:
         if feedback is not None:  # simulator processes
             feedback.close()
@@ -155,6 +161,8 @@ def _build_trueadapt(cfg: dict[str, Any], req: EnvRequest):
 
     if req.paths is not None:
         raise ValueError("a TrueAdapt task runs on trajectories, not on a path bank")
+    if not req.reward:
+        raise ValueError("a TrueAdapt env always computes its reward (its task term decides failures)")
     if req.backend is not None:
         cfg = {**cfg, "task": {**cfg["task"], "backend": req.backend}}
     overrides = dict(req.overrides)

@@ -140,16 +140,11 @@ def _values_read(reward_terms: list[RewardTerm], feedback: Feedback | None) -> s
 class PathTrackingEnv(_VecEnvBase):
     """N robots tracking reference path segments in parallel."""
 
-    def __init__(
-        self,
-        cfg: TrackingEnvCfg,
-        robot: RobotSpec,
-        paths: PathSet,
-        reward_terms: list[RewardTerm],
-        feedback: Feedback | None = None,
-    ) -> None:
+    def __init__(self, cfg: TrackingEnvCfg, robot: RobotSpec, paths: PathSet, reward_terms: list[RewardTerm],
+                 feedback: Feedback | None = None, fk: ForwardKinematics | None = None) -> None:
         self.cfg, self.limit_backend = cfg, cfg.limit_backend  # limit code of steps (None: the one in effect)
         self.feedback = feedback
+        self._fk = fk  # the env's one kinematics object (shared with its feedback), built on first use (self.fk)
         self.control_steps = int(round(cfg.control_rate * cfg.dt))
         self.robot = robot
         self.device = torch.device(cfg.device)
@@ -172,7 +167,6 @@ class PathTrackingEnv(_VecEnvBase):
         self.dev_weights = w * math.sqrt(len(w) / float((w**2).sum()))
         self.max_episode_length = int(math.ceil(cfg.episode_budget_s / cfg.dt)) + 1
         self.tcp_box = None
-        self.fk = ForwardKinematics(robot, device=self.device) if self.tcp_reward or cfg.tcp_obs else None
         if cfg.tcp_obs:
             box = torch.as_tensor(cfg.tcp_obs_box, dtype=torch.float64, device=self.device)
             if box.shape != (6,) or not bool((box[1::2] > box[0::2]).all()) or not cfg.tcp_obs_error > 0:
@@ -214,6 +208,14 @@ class PathTrackingEnv(_VecEnvBase):
         #: (pathrl.envs.path_changes) keep their branches in rows behind them.
         self.sample_paths: int | None = None
         self.reset()
+
+    @property
+    def fk(self) -> ForwardKinematics:
+        """The forward kinematics of this env's robot on its device: one object for everything of the env (its
+        feedback, TCP observations and rewards, controllers, evaluation metrics), built on first use."""
+        if self._fk is None:
+            self._fk = ForwardKinematics(self.robot, device=self.device)
+        return self._fk
 
     # ------------------------------------------------------------------ episode management
     def reset(self) -> TensorDict:

@@ -50,6 +50,7 @@ from pathrl.envs.trueadapt_rewards import AdaptQuantities, AdaptReward
 from pathrl.limits.backend import LimitBackend, env_scoped
 from pathrl.limits.feasible import JointLimits, valid_acceleration_range
 from pathrl.limits.integrate import end_of_step, interpolate_step
+from pathrl.robot.kinematics import ForwardKinematics
 from pathrl.robot.model import RobotSpec
 from pathrl.sim.feedback import PLATE_SIZE, AnalyticBall
 
@@ -140,7 +141,7 @@ class TrueAdaptEnv(_VecEnvBase):
     """N robots adapting reference trajectories while carrying a ball on a plate (rsl-rl ``VecEnv``)."""
 
     def __init__(self, cfg: AdaptEnvCfg, robot: RobotSpec, bank: TrajectoryBank, reward: AdaptReward,
-                 ball: AnalyticBall | None = None) -> None:
+                 ball: AnalyticBall | None = None, fk: ForwardKinematics | None = None) -> None:
         if abs(bank.dt - cfg.dt) > 1e-12:
             raise ValueError(f"trajectories are sampled every {bank.dt} s, env.dt is {cfg.dt}")
         if bank.pos.shape[2] != robot.dof:
@@ -148,6 +149,7 @@ class TrueAdaptEnv(_VecEnvBase):
         self.cfg, self.robot, self.reward = cfg, robot, reward
         self.limit_backend = cfg.limit_backend
         self.device = torch.device(cfg.device)
+        self._fk = fk  # the env's one kinematics object (its ball's, controllers', records'), built on first use
         self.num_envs = n = cfg.num_envs
         self.num_actions = robot.dof
         self.generator = torch.Generator(device=self.device)
@@ -156,7 +158,7 @@ class TrueAdaptEnv(_VecEnvBase):
         self.bank = bank.to(self.device)
         self.control_steps = int(round(cfg.control_rate * cfg.dt))
         self.ball = ball if ball is not None else AnalyticBall(robot, n, cfg.control_rate, seed=cfg.seed + 1,
-                                                               device=self.device)
+                                                               device=self.device, fk=self.fk)
         self.max_episode_length = int(self.bank.steps.max())
         self.knot_gap = None  # no knots: the runner records this for tracking envs
         f64 = dict(dtype=torch.float64, device=self.device)
@@ -179,6 +181,14 @@ class TrueAdaptEnv(_VecEnvBase):
         self.record_setpoints = False
         self._obs: Tensor | None = None
         self.reset()
+
+    @property
+    def fk(self) -> ForwardKinematics:
+        """The forward kinematics of this env's robot on its device: one object for the env's ball, controllers
+        and records, built on first use."""
+        if self._fk is None:
+            self._fk = ForwardKinematics(self.robot, device=self.device)
+        return self._fk
 
     # ------------------------------------------------------------------ episodes
     def reset(self) -> TensorDict:
@@ -430,10 +440,11 @@ def build_trueadapt_env(cfg: dict, split: str = "train", num_envs: int | None = 
     check_run_device({"device": env_cfg.device, "task": cfg["task"]})  # before any data is read; PyBullet: the CPU
     robot = load_robot(cfg["robot"])
     bank = load_trajectories(dataset_path or cfg["dataset"]["path"], split, robot, env_cfg.dt)
+    fk = ForwardKinematics(robot, device=env_cfg.device)  # the env's, shared with its ball
     ball = None
     if cfg["task"]["backend"] == "pybullet":
         from pathrl.sim.vec import PyBulletBall
 
         ball = PyBulletBall(robot, env_cfg.num_envs, env_cfg.control_rate, seed=env_cfg.seed + 1,
-                            workers=int(cfg["task"].get("workers", 2)))
-    return TrueAdaptEnv(env_cfg, robot, bank, build_adapt_reward(cfg["reward"]["terms"]), ball)
+                            workers=int(cfg["task"].get("workers", 2)), fk=fk)
+    return TrueAdaptEnv(env_cfg, robot, bank, build_adapt_reward(cfg["reward"]["terms"]), ball, fk)

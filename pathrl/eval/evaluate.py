@@ -222,7 +222,7 @@ def _finish(records: list[EpisodeRecord], rollout_s: float, src: _Source, opts: 
     (+ episodes.mcap) into `out`."""
     robot, env, paths = src.robot, src.env, src.paths
     t0 = time.perf_counter()
-    fk = ForwardKinematics(robot)
+    fk = env.fk  # the env's kinematics (evaluation envs are on the CPU: EVAL_ENV)
     limits = JointLimits.from_robot(robot)
     setpoints, path_index = [r.setpoints for r in records], torch.as_tensor(robot.path_index)
     matched = matched_samples(setpoints, path_index, paths, [r.path for r in records], [r.start_s for r in records],

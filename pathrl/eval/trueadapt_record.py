@@ -139,7 +139,7 @@ def record_trueadapt(env: TrueAdaptEnv, actor: Actor, episodes: int, out_path: P
     traj = torch.arange(episodes) % env.bank.num if trajectories is None else torch.as_tensor(trajectories)
     if traj.ndim != 1 or len(traj) == 0 or int(traj.min()) < 0 or int(traj.max()) >= env.bank.num:
         raise ValueError(f"trajectories must be bank indices in [0, {env.bank.num}), got {traj.tolist()}")
-    fk = ForwardKinematics(env.robot)
+    fk = env.fk
     batches = [(lo, traj[lo:lo + env.num_envs]) for lo in range(0, len(traj), env.num_envs)]
     runs = [(lo, t, run_batch(env, actor, t)) for lo, t in batches]
     out = Path(out_path)

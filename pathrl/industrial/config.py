@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from typing import Any
 
 from pathrl.industrial.controller import ControllerParams
@@ -12,7 +12,7 @@ from pathrl.industrial.mpgd import MPGDParams
 from pathrl.industrial.rl import RLParams
 from pathrl.industrial.speed_search import SearchParams
 
-__all__ = ["IndustrialAppCfg", "build", "check_app", "feedback_gain"]
+__all__ = ["IndustrialAppCfg", "app_cfg", "build", "check_app", "feedback_gain"]
 
 
 @dataclass
@@ -61,6 +61,14 @@ def _numbers(node: Any, prefix: str = "") -> Iterator[tuple[str, float]]:
             yield from _numbers(v, f"{prefix.rstrip('.')}[{i}].")
     elif isinstance(node, float):
         yield prefix.rstrip("."), node
+
+
+def app_cfg(cfg: dict[str, Any]) -> IndustrialAppCfg:
+    """The typed app config of a composed config mapping (every key of the schema), its values checked first
+    (:func:`check_app`; ValueError on a bad value) and its groups as their parameter dataclasses (:func:`build`)."""
+    controller, mpgd, search, rl = build(cfg)
+    groups = {"controller": controller, "mpgd": mpgd, "search": search, "rl": rl}
+    return IndustrialAppCfg(**groups, **{f.name: cfg[f.name] for f in fields(IndustrialAppCfg) if f.name not in groups})
 
 
 def check_app(cfg: dict[str, Any]) -> None:

@@ -235,11 +235,12 @@ class AnalyticBall:
     ok_value = "ball_on_plate"
 
     def __init__(self, robot: RobotSpec, num_envs: int, control_rate: float = 240.0, seed: int = 0,
-                 device: str | torch.device = "cpu", model_rate: float = 40.0, imu: bool = False):
+                 device: str | torch.device = "cpu", model_rate: float = 40.0, imu: bool = False,
+                 fk: ForwardKinematics | None = None):
         if len(robot.tcps) != 1:
             raise ValueError(f"ball on plate needs a robot with one TCP, {robot.name} has {len(robot.tcps)}")
         self.device = torch.device(device)
-        self.fk = ForwardKinematics(robot, device=self.device)
+        self.fk = fk if fk is not None else ForwardKinematics(robot, device=self.device)  # the env's (make_env)
         self.imu = PlateIMU(robot, num_envs, control_rate, self.device, self.fk) if imu else None
         self.num_obs = 4 + (PlateIMU.num_obs if imu else 0)
         self.n = num_envs

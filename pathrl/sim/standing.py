@@ -218,14 +218,15 @@ class AnalyticStanding:
     ok_value = "upright"
 
     def __init__(self, robot: RobotSpec, num_envs: int, control_rate: float = 240.0, seed: int = 0,
-                 device: str | torch.device = "cpu", model_rate: float = 40.0, feet: tuple[str, ...] = FEET):
+                 device: str | torch.device = "cpu", model_rate: float = 40.0, feet: tuple[str, ...] = FEET,
+                 fk: ForwardKinematics | None = None):
         self.device = torch.device(device)
         self.n = num_envs
         self.stride = max(1, int(round(control_rate / model_rate)))  # control setpoints per model instant
         self.h, self.dtc = self.stride / control_rate, 1.0 / control_rate  # s
         self.generator = torch.Generator(device=self.device)  # the model draws nothing yet; a randomized one would
         self.generator.manual_seed(seed)
-        self.fk = ForwardKinematics(robot, device=self.device)
+        self.fk = fk if fk is not None else ForwardKinematics(robot, device=self.device)  # the env's (make_env)
         f64 = dict(dtype=torch.float64, device=self.device)
         inert = rigid_bodies(robot)  # the links that move together merged (ARMAR-4: 47 links, 31 bodies)
         self.links = list(inert)

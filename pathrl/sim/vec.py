@@ -21,6 +21,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from pathrl.robot.kinematics import ForwardKinematics
 from pathrl.robot.model import RobotSpec
 from pathrl.sim.feedback import USABLE_HALF, FeedbackStep, PlateDrive, PlateIMU, ball_observation
 from pathrl.sim.standing import BASE_POS_SCALE, FALL_TILT_RAD, standing_observation, standing_values
@@ -207,10 +208,11 @@ class PyBulletBall(_PooledFeedback):
     ok_value = "ball_on_plate"
 
     def __init__(self, robot: RobotSpec, num_envs: int, control_rate: float = 240.0, seed: int = 0,
-                 workers: int = 2, imu: bool = False):
+                 workers: int = 2, imu: bool = False, fk: ForwardKinematics | None = None):
         super().__init__(robot, num_envs, control_rate, seed, workers)
-        self.imu = PlateIMU(robot, num_envs, control_rate) if imu else None
-        self.plate_drive = PlateDrive(robot, num_envs, control_rate, fk=self.imu.fk if imu else None)
+        fk = fk if fk is not None else ForwardKinematics(robot)  # the env's (make_env): plate sensor and drive
+        self.imu = PlateIMU(robot, num_envs, control_rate, fk=fk) if imu else None
+        self.plate_drive = PlateDrive(robot, num_envs, control_rate, fk=fk)
         self.num_obs = 4 + (PlateIMU.num_obs if imu else 0)
         self.half = torch.tensor(USABLE_HALF, dtype=torch.float64)
         self.xy = torch.zeros(num_envs, 2, dtype=torch.float64)

@@ -1,4 +1,9 @@
-"""Build a run from a resolved config: dataset -> env -> RSL-RL OnPolicyRunner; train with checkpoints and resume."""
+"""Build a run from a resolved config: dataset -> env -> RSL-RL OnPolicyRunner; train with checkpoints and resume.
+
+The run reads its config as the typed :class:`pathrl.schema.TrainAppCfg` (the CLI converts once; a mapping given
+here is checked and converted by :func:`check_run_cfg`); the library code that also reads saved runs (the env
+registry, resume, bias search) takes its plain dict (:func:`pathrl.schema.config_dict`), which is what
+``config.yaml`` holds."""
 
 from __future__ import annotations
 
@@ -8,7 +13,7 @@ import math
 import shutil
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -17,7 +22,7 @@ import yaml
 from rsl_rl.runners import DistillationRunner, OnPolicyRunner
 
 from pathrl.envs.device import check_run_device
-from pathrl.envs.path_changes import with_path_changes
+from pathrl.envs.path_changes import PathChanges
 from pathrl.envs.registry import make_env
 from pathrl.envs.state import restore, snapshot, snapshot_is_exact, unwrapped
 from pathrl.envs.tracking import PathTrackingEnv
@@ -25,6 +30,7 @@ from pathrl.limits.backend import LimitBackend
 from pathrl.policy import policy_role
 from pathrl.policy.models import MixedMLP
 from pathrl.policy.residual import ControllerObs, ResidualEnv, check_residual_cfg, zero_last_layer
+from pathrl.schema import TrainAppCfg, config_dict, train_app_cfg
 from pathrl.storage import (
     atomic_write,
     checkpoint_iteration,
@@ -42,11 +48,11 @@ __all__ = [
 ]
 
 
-def rsl_train_cfg(cfg: dict[str, Any], resume_from: int | None = None) -> dict[str, Any]:
-    """RSL-RL train cfg: the agent config verbatim plus our MCAP log writer, which keeps the log up to the
-    checkpoint iteration `resume_from` (None: a fresh log)."""
-    agent = copy.deepcopy(cfg["agent"])
-    agent["logger"] = {"class_name": "pathrl.train.mcap_logger:McapLogWriter", "run_config": cfg,
+def rsl_train_cfg(cfg: TrainAppCfg, resume_from: int | None = None) -> dict[str, Any]:
+    """RSL-RL train cfg: the agent config verbatim plus our MCAP log writer (given the run config as a plain dict),
+    which keeps the log up to the checkpoint iteration `resume_from` (None: a fresh log)."""
+    agent = copy.deepcopy(cfg.agent)
+    agent["logger"] = {"class_name": "pathrl.train.mcap_logger:McapLogWriter", "run_config": config_dict(cfg),
                        "keep_through": resume_from}
     return agent
 
@@ -239,37 +245,41 @@ class PathRLDistillationRunner(PathRLRunner, DistillationRunner):
         return super().load_state(loaded, load_cfg or {"student": True, "optimizer": True, "iteration": True}, strict)
 
 
-def check_run_cfg(cfg: dict[str, Any]) -> None:
-    """Refuse run-level values that would run but give a wrong result (one-line ValueError naming the key); the
-    env's own values are checked by :class:`pathrl.envs.tracking_cfg.TrackingEnvCfg`; unknown keys are refused."""
+def check_run_cfg(cfg: TrainAppCfg | Mapping[str, Any]) -> TrainAppCfg:
+    """The typed run config, its run-level values checked: one-line ValueError naming the key of a value that would
+    run but give a wrong result; the env's own values are checked by :class:`pathrl.envs.tracking_cfg.TrackingEnvCfg`.
+    A mapping (a resolved config) has its keys checked against the schema (unknown keys refused) and is converted."""
     from pathrl.config.agent import check_agent
     from pathrl.config.validate import check_keys
-    from pathrl.schema import TrainAppCfg
 
-    check_keys(cfg, TrainAppCfg)
-    if int(cfg["iterations"]) < 1:
-        raise ValueError(f"iterations must be >= 1, got {cfg['iterations']}")
-    if int(cfg.get("threads", 1)) < 1:
-        raise ValueError(f"threads must be >= 1, got {cfg['threads']}")
-    check_run_device(cfg)  # cpu, cuda, cuda:N that exists; a PyBullet task on the CPU only (DeviceError)
-    warm = cfg.get("critic_warmup") or {}
-    if int(warm.get("iterations") or 0) < 0:
-        raise ValueError(f"critic_warmup.iterations must be >= 0, got {warm['iterations']}")
-    check_agent(cfg.get("agent"))  # RSL-RL's keys: types and ranges (gamma, lambda, learning rate, dims, ...)
-    if cfg.get("float32_from") is not None:
-        float32_iteration(cfg["float32_from"], int(cfg["iterations"]))
+    if not isinstance(cfg, TrainAppCfg):
+        check_keys(cfg, TrainAppCfg)
+        cfg = train_app_cfg(cfg)
+    if cfg.iterations < 1:
+        raise ValueError(f"iterations must be >= 1, got {cfg.iterations}")
+    if cfg.threads < 1:
+        raise ValueError(f"threads must be >= 1, got {cfg.threads}")
+    raw = config_dict(cfg)
+    check_run_device(raw)  # cpu, cuda, cuda:N that exists; a PyBullet task on the CPU only (DeviceError)
+    if cfg.critic_warmup.iterations < 0:
+        raise ValueError(f"critic_warmup.iterations must be >= 0, got {cfg.critic_warmup.iterations}")
+    check_agent(cfg.agent)  # RSL-RL's keys: types and ranges (gamma, lambda, learning rate, dims, ...)
+    if cfg.float32_from is not None:
+        float32_iteration(cfg.float32_from, cfg.iterations)
     _check_lr_decay(cfg)
-    LimitBackend.from_run(cfg)  # native_limits, compile_limits: true or false
+    LimitBackend.from_run(raw)  # native_limits, compile_limits: true or false
+    return cfg
 
 
-def train(cfg: dict[str, Any], run_dir: Path, resume: bool = False,
+def train(cfg: TrainAppCfg | Mapping[str, Any], run_dir: Path, resume: bool = False,
           on_start: Callable[[PathRLRunner], None] | None = None) -> dict[str, Any]:
     """Train (or resume) a policy; writes config.yaml, checkpoints, run.mcap and summary.json into `run_dir`.
+    `cfg`: the typed run config (a resolved mapping is checked and converted once, :func:`check_run_cfg`).
     `on_start(runner)` is called once the runner is built (and, on resume, restored), before the first iteration.
 
     A start that fails before its first checkpoint leaves `run_dir` as it found it (missing or empty); a resume
     with nothing left to do changes nothing and returns the run's summary."""
-    check_run_cfg(cfg)
+    cfg = check_run_cfg(cfg)
     run_dir = Path(run_dir)
     fresh = not run_dir.exists() or (run_dir.is_dir() and not any(run_dir.iterdir()))
     existed = run_dir.exists()
@@ -289,35 +299,28 @@ def _undo_start(run_dir: Path, keep_dir: bool) -> None:
         run_dir.rmdir()
 
 
-def _train(cfg: dict[str, Any], run_dir: Path, resume: bool,
+def _train(cfg: TrainAppCfg, run_dir: Path, resume: bool,
            on_start: Callable[[PathRLRunner], None] | None) -> dict[str, Any]:
     """:func:`train` after its checks."""
-    torch.set_num_threads(int(cfg.get("threads", 1)))
-    torch.manual_seed(int(cfg["seed"]))
+    raw = config_dict(cfg)  # what config.yaml holds and the dict-reading library code takes
+    torch.set_num_threads(cfg.threads)
+    torch.manual_seed(cfg.seed)
     run_dir.mkdir(parents=True, exist_ok=True)
-    ckpt = resume_checkpoint(run_dir, cfg, resume)
-    finished = finished_summary(run_dir, ckpt, int(cfg["iterations"]))
+    ckpt = resume_checkpoint(run_dir, raw, resume)
+    finished = finished_summary(run_dir, ckpt, cfg.iterations)
     if finished is not None:
-        print(f"note: {run_dir} has finished {finished['iterations']} iterations (iterations={cfg['iterations']}): "
+        print(f"note: {run_dir} has finished {finished['iterations']} iterations (iterations={cfg.iterations}): "
               "nothing to do, nothing changed", file=sys.stderr)
         return finished
-    with LimitBackend(native=LimitBackend.from_run(cfg).native).active():  # the run's native choice, kernels eager
-        env = make_env(cfg)  # bad values and data fail here, before anything is written into run_dir
-    start_notes(cfg)
-    env = with_path_changes(cfg, env)  # path_change group (pathrl.envs.path_changes); absent or off: env itself
-    distill = cfg["agent"]["algorithm"]["class_name"] == "Distillation"
-    if distill:
-        env = _with_teacher(cfg, env)
-    elif cfg.get("residual"):
-        env = _with_base(cfg, env)
-    atomic_write(run_dir / "config.yaml", yaml.safe_dump(cfg, sort_keys=False))
+    env = _training_env(cfg, raw)
+    atomic_write(run_dir / "config.yaml", yaml.safe_dump(raw, sort_keys=False))
     prev = json.loads((run_dir / "summary.json").read_text()) if (run_dir / "summary.json").exists() else {}
     # The observation normalizer D must be known to evaluate the policy on any other path set.
-    write_json_atomic(run_dir / "summary.json",
-                      {**prev, "experiment": cfg["experiment"], "knot_gap_norm": env.knot_gap})
-    train_cfg = rsl_train_cfg(cfg, None if ckpt is None else checkpoint_iteration(ckpt))
+    write_json_atomic(run_dir / "summary.json", {**prev, "experiment": cfg.experiment, "knot_gap_norm": env.knot_gap})
+    rsl = rsl_train_cfg(cfg, None if ckpt is None else checkpoint_iteration(ckpt))  # RSL-RL's train cfg
+    distill = _distills(cfg)
     runner_cls = PathRLDistillationRunner if distill else PathRLRunner
-    runner = runner_cls(env, train_cfg, log_dir=str(run_dir), device=cfg.get("device", "cpu"))
+    runner = runner_cls(env, rsl, log_dir=str(run_dir), device=cfg.device)
     if distill:
         runner.alg.teacher_loaded = True  # a controller: nothing to load (pathrl.train.distill)
     done_before, loaded = 0, None
@@ -326,37 +329,64 @@ def _train(cfg: dict[str, Any], run_dir: Path, resume: bool,
         runner.load_state(loaded)
         runner.current_learning_iteration += 1  # the checkpoint's iteration is finished
         done_before = runner.current_learning_iteration
-    elif cfg.get("init_from"):
+    elif cfg.init_from:
         from pathrl.train.warm_start import warm_start
 
-        warm_start(runner.alg, cfg["init_from"], env.num_obs, _init_std(cfg), env.robot.joints, env.robot.path_joints)
-    elif cfg.get("residual"):
+        warm_start(runner.alg, cfg.init_from, env.num_obs, _init_std(cfg), env.robot.joints, env.robot.path_joints)
+    elif cfg.residual:
         zero_last_layer(runner.alg.get_policy())  # the untrained residual policy is its controller
-    if ckpt is None and cfg.get("bias_search"):
+    if ckpt is None and cfg.bias_search:
         from pathrl.train.bias_search import search_before_training
 
-        prev = search_before_training(cfg, runner.alg.get_policy(), env.knot_gap, run_dir / "summary.json")
-    total = int(cfg["iterations"])
-    _schedules(runner, cfg, total)
-    remaining = max(total - done_before, 0)
+        prev = search_before_training(raw, runner.alg.get_policy(), env.knot_gap, run_dir / "summary.json")
+    _schedules(runner, cfg)
     runner.track_wall_time(run_dir / "summary.json", float(prev.get("wall_time_s", 0.0)))
     if loaded is not None:
         resume_notes(runner, loaded, ckpt.name, runner.restore_streams(loaded))
     placement_warning(runner)
     if on_start is not None:
         on_start(runner)
+    _learn(runner, cfg, max(cfg.iterations - done_before, 0), raw)
+    return _finish(runner, cfg, env, run_dir, int(rsl["num_steps_per_env"]) * env.num_envs)
+
+
+def _training_env(cfg: TrainAppCfg, raw: dict[str, Any]):
+    """The run's training env (its task's, through the registry: bad values and data fail here, before anything is
+    written into run_dir), with path changes, and the teacher's labels (distillation) or the residual's base."""
+    with LimitBackend(native=cfg.native_limits).active():  # the run's native choice, kernels eager
+        env = make_env(raw)
+    start_notes(raw)
+    pc = cfg.path_change  # path_change group (pathrl.envs.path_changes); absent or off: env itself
+    if pc is not None and pc.enabled:
+        env = PathChanges(env, pc)
+    if _distills(cfg):
+        return _with_teacher(cfg, env)
+    return _with_base(cfg, env) if cfg.residual else env
+
+
+def _distills(cfg: TrainAppCfg) -> bool:
+    """Whether the run distils a teacher (RSL-RL's Distillation) rather than running PPO."""
+    return cfg.agent["algorithm"]["class_name"] == "Distillation"
+
+
+def _learn(runner: PathRLRunner, cfg: TrainAppCfg, remaining: int, raw: dict[str, Any]) -> None:
+    """Run the `remaining` iterations under the run's limit code (native_limits, compile_limits; the env follows
+    it); none left (killed after its last checkpoint): rewrite, and so close, the log the killed process left open."""
     if remaining:
-        with LimitBackend.from_run(cfg).active():  # native_limits, compile_limits (the env follows it)
+        with LimitBackend.from_run(raw).active():
             runner.learn(num_learning_iterations=remaining)
-    else:  # killed after its last checkpoint: rewrite (and so close) the log the killed process left open
+    else:
         runner.logger.init_logging_writer()
         runner.logger.stop_logging_writer()
-    steps_per_iter = int(train_cfg["num_steps_per_env"]) * env.num_envs
+
+
+def _finish(runner: PathRLRunner, cfg: TrainAppCfg, env: Any, run_dir: Path, steps_per_iter: int) -> dict[str, Any]:
+    """The run's summary (``steps_per_iter``: env steps per iteration), written to summary.json and returned."""
     last_ckpt = latest_checkpoint(run_dir)
     summary = {
-        "experiment": cfg["experiment"],
-        "iterations": total,
-        "env_steps": total * steps_per_iter,
+        "experiment": cfg.experiment,
+        "iterations": cfg.iterations,
+        "env_steps": cfg.iterations * steps_per_iter,
         "wall_time_s": runner.wall_time_s(),
         "num_envs": env.num_envs,
         "steps_per_iteration": steps_per_iter,
@@ -371,32 +401,29 @@ def _train(cfg: dict[str, Any], run_dir: Path, resume: bool,
     return summary
 
 
-def _schedules(runner: PathRLRunner, cfg: dict[str, Any], total: int) -> None:
+def _schedules(runner: PathRLRunner, cfg: TrainAppCfg) -> None:
     """The per-iteration schedules of a run: critic warm-up, action-noise cap, learning rate, float32 switch."""
-    warmup = cfg.get("critic_warmup") or {}
-    if warmup.get("freeze_normalizer"):
+    total, warmup, anneal, decay = cfg.iterations, cfg.critic_warmup, cfg.std_anneal, cfg.lr_decay
+    if warmup.freeze_normalizer:
         runner.freeze_actor_normalizer()
-    if int(warmup.get("iterations") or 0) > 0:
-        lr = warmup.get("learning_rate")
-        runner.set_critic_warmup(int(warmup["iterations"]), None if lr is None else float(lr))
-    anneal = cfg.get("std_anneal")
-    if anneal:
-        runner.set_std_schedule(total, _init_std(cfg), float(anneal["final"]), float(anneal["start"]))
-    decay = cfg.get("lr_decay") or {}
-    if decay.get("final") is not None:
-        runner.set_lr_decay(total, float(decay["final"]), float(decay["start"]))
-    if cfg.get("float32_from") is not None:
-        runner.set_float32_from(float32_iteration(cfg["float32_from"], total))
+    if warmup.iterations > 0:
+        runner.set_critic_warmup(warmup.iterations, warmup.learning_rate)
+    if anneal is not None:
+        runner.set_std_schedule(total, _init_std(cfg), anneal.final, anneal.start)
+    if decay.final is not None:
+        runner.set_lr_decay(total, decay.final, decay.start)
+    if cfg.float32_from is not None:
+        runner.set_float32_from(float32_iteration(cfg.float32_from, total))
 
 
-def _check_lr_decay(cfg: dict[str, Any]) -> None:
+def _check_lr_decay(cfg: TrainAppCfg) -> None:
     """ValueError for an `lr_decay` that would not act as written (bad values; PPO's adaptive schedule)."""
-    decay = cfg.get("lr_decay") or {}
-    if decay.get("final") is None:
+    decay = cfg.lr_decay
+    if decay.final is None:
         return
-    if not float(decay["final"]) > 0 or not 0 <= float(decay["start"]) < 1:
-        raise ValueError(f"lr_decay: final must be > 0 and start in [0, 1), got {decay}")
-    if cfg["agent"]["algorithm"].get("schedule", "fixed") != "fixed":
+    if not decay.final > 0 or not 0 <= decay.start < 1:
+        raise ValueError(f"lr_decay: final must be > 0 and start in [0, 1), got {config_dict(decay)}")
+    if cfg.agent["algorithm"].get("schedule", "fixed") != "fixed":
         raise ValueError("lr_decay needs agent.algorithm.schedule=fixed (the adaptive schedule sets the rate itself)")
 
 
@@ -412,30 +439,30 @@ def float32_iteration(fraction: Any, total: int) -> int:
     return int(math.ceil(f * total))
 
 
-def _init_std(cfg: dict[str, Any]) -> float:
+def _init_std(cfg: TrainAppCfg) -> float:
     """The initial action std of the policy (the PPO actor or the distillation student)."""
-    return float(cfg["agent"][policy_role(cfg["agent"])]["distribution_cfg"].get("init_std", 1.0))
+    return float(cfg.agent[policy_role(cfg.agent)]["distribution_cfg"].get("init_std", 1.0))
 
 
-def _with_teacher(cfg: dict[str, Any], env: PathTrackingEnv):
+def _with_teacher(cfg: TrainAppCfg, env: PathTrackingEnv):
     """The env of a distillation run: its observations carry the teacher controller's actions."""
     from pathrl.runs import make_controller
     from pathrl.train.distill import TeacherLabels
 
-    if not cfg.get("teacher"):
+    if not cfg.teacher:
         raise ValueError("agent=distillation needs a teacher controller (teacher: {name: tray, ...})")
-    if cfg.get("init_from"):
+    if cfg.init_from:
         raise ValueError("init_from: a distillation run starts its student from scratch; remove init_from")
-    if int((cfg.get("critic_warmup") or {}).get("iterations") or 0):
+    if cfg.critic_warmup.iterations:
         raise ValueError("critic_warmup: a distillation run has no critic")
-    if cfg.get("residual"):
+    if cfg.residual:
         raise ValueError("residual: a distillation run trains a whole policy, not a residual; remove residual")
-    return TeacherLabels(env, make_controller(cfg["teacher"], env))
+    return TeacherLabels(env, make_controller(cfg.teacher, env))
 
 
-def _with_base(cfg: dict[str, Any], env: PathTrackingEnv) -> ResidualEnv:
+def _with_base(cfg: TrainAppCfg, env: PathTrackingEnv) -> ResidualEnv:
     """The env of a residual run: it acts with the controller's action plus the policy's scaled residual."""
     from pathrl.runs import make_controller
 
-    scale, spec = check_residual_cfg(cfg["residual"])
+    scale, spec = check_residual_cfg(cfg.residual)
     return ResidualEnv(env, make_controller(spec, env), scale)
