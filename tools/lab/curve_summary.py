@@ -18,15 +18,18 @@ from pathlib import Path
 from pathrl.storage.atomic import atomic_write
 from pathrl.train.ship import curve_csv, read_training_log, training_curve
 
-WINDOWS = {"task_failed": "ball_lost", "deviation": "deviation_limit", "robot_stopped": "reached_end"}
+#: Names the summary gives some curve columns (the ball task's terminations); other columns keep their own.
+NAMES = {"Episode_Termination/task_failed": "ball_lost", "Episode_Termination/deviation": "deviation_limit",
+         "Episode_Termination/robot_stopped": "reached_end", "Metrics/duration_s": "duration_s",
+         "Metrics/success": "success"}
 
 
 def window(rows: list[dict[str, str]], first: int, last: int) -> dict[str, float | int]:
-    """Mean termination shares and duration (s) over iterations first..last (inclusive) of the curve's rows."""
+    """Means over iterations first..last (inclusive) of the curve's termination shares, duration (s) and success
+    (where logged), named by NAMES."""
     sel = [r for r in rows if first <= int(r["iteration"]) <= last]
-    mean = {name: sum(float(r[f"Episode_Termination/{key}"] or 0.0) for r in sel) / len(sel)
-            for key, name in WINDOWS.items()}
-    mean["duration_s"] = sum(float(r["Metrics/duration_s"] or 0.0) for r in sel) / len(sel)
+    cols = [c for c in rows[0] if c.startswith("Episode_Termination/") or c in NAMES]
+    mean = {NAMES.get(c, c.split("/")[-1]): sum(float(r[c] or 0.0) for r in sel) / len(sel) for c in cols}
     return {"first": first, "last": last, **mean}
 
 
