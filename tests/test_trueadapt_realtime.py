@@ -49,4 +49,4 @@ def test_the_tables_show_the_measurement_or_say_it_is_missing(tmp_path):
     (tmp_path / f"{adapt.REALTIME_ID}.json").write_text("{}")
     assert adapt.realtime_command(ROOT, tmp_path, ROOT / "models", ROOT / "datasets", 10, reuse=True) is None
     cmd = adapt.realtime_command(ROOT, tmp_path, ROOT / "models", ROOT / "datasets", 10)
-    assert cmd[:3] == ["-m", "pathrl.eval.trueadapt_realtime", f"models/{adapt.REALTIME_MODEL}"]
+    assert cmd[:6] == ["python", "-m", adapt.FAMILY_STEP, "trueadapt", "timing", f"models/{adapt.REALTIME_MODEL}"]

@@ -81,6 +81,8 @@ def limit_code(mode: str, threads: int = 1, native_threads: int | None = None):
 
 def bench_env(robot_name: str, num_envs: int, seconds: float, mode: str = "native", threads: int = 1,
               native_threads: int | None = None) -> dict:
+    """Env steps per second of `num_envs` random-path tracking envs of robot `robot_name`, stepped for `seconds` (s)
+    after a warm-up, with the limit code `mode` (native | torch | eager, :func:`limit_code`) on `threads` threads."""
     with limit_code(mode, threads, native_threads):
         if mode == "native" and not native.available():
             raise RuntimeError("the native limit code is not built (no C compiler?)")
@@ -92,6 +94,8 @@ def bench_env(robot_name: str, num_envs: int, seconds: float, mode: str = "nativ
 
 
 def bench_reference(robot_name: str, seconds: float) -> dict:
+    """Steps per second of the one-env numpy reference env (:mod:`pathrl.envs.reference`) on one synthetic path of
+    robot `robot_name`, random actions, over `seconds` (s)."""
     from pathrl.envs.reference import ReferencePath, ReferenceSettings, ReferenceTrackingEnv
     from pathrl.limits.braking import braking_acceleration
     from pathrl.limits.feasible import JointLimits

@@ -7,6 +7,7 @@ from pathlib import Path
 __all__ = ["print_follower", "print_results"]
 
 def print_follower(res: dict) -> None:
+    """The follower latencies of a bench result `res` (``bench/follower.json``'s content) as a table on the console."""
     from rich.console import Console
     from rich.table import Table
 
@@ -46,6 +47,7 @@ def _follower_rows(t, res: dict) -> None:
 
 
 def print_results(res: dict, out: Path) -> None:
+    """Every benchmark of a result `res` (written to `out`) as a table on the console."""
     from rich.console import Console
     from rich.table import Table
 
