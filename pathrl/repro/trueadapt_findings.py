@@ -51,6 +51,10 @@ FINDINGS: tuple[Finding, ...] = (
 )
 
 
+#: The table's rows by key.
+_BY_KEY = {r.key: r for r in ROWS}
+
+
 def outcome(ratio: float, column: str) -> str:
     """The class of an ablation's value over the full policy's: success ``fails`` (< 0.25), ``partly`` (< 0.9) or
     ``keeps``; a penalised quantity (|acc|, |jerk|) ``rises`` (> 2x) or ``stays``."""
@@ -61,10 +65,9 @@ def outcome(ratio: float, column: str) -> str:
 
 def _ours_ratio(results: dict[str, Any], key: str | None, full: str, column: str) -> tuple[float, float] | None:
     """(ablation, full) values of ours for row keys `key` and `full`, or None if either has no result."""
-    rows = {r.key: r for r in ROWS}
     if key is None:
         return None
-    a, b = (ours(row_values(results, rows[k])[0], column) for k in (key, full))
+    a, b = (ours(row_values(results, _BY_KEY[k])[0], column) for k in (key, full))
     return None if a is None or b is None or b == 0 else (a, b)
 
 
@@ -93,9 +96,8 @@ def markdown(results: dict[str, Any]) -> list[str]:
         full = p["rows"]["on_plate/test_set"][idx[f.column]]
         value = p["rows"][f.key][idx[f.column]]
         cls = outcome(value / full, f.column)
-        setting = next(r.setting for r in ROWS if r.key == f.key)
         cells = (_finding_cells(_ours_ratio(results, f.scratch, "on_plate/test_set_scratch", f.column), f.column, cls)
                  + _finding_cells(_ours_ratio(results, f.teacher, f.teacher_full, f.column), f.column, cls))
-        lines.append(f"| {setting} | {names[f.column]} | {value:.1f} / {full:.1f} ({cls}) | " + " | ".join(cells)
-                     + " |")
+        lines.append(f"| {_BY_KEY[f.key].setting} | {names[f.column]} | {value:.1f} / {full:.1f} ({cls}) | "
+                     + " | ".join(cells) + " |")
     return lines

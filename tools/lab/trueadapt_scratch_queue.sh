@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Train the TrueAdapt from-scratch experiments one after another (2 cores: one training at a time), each resumable,
 # then evaluate each in PyBullet on the 1000 test trajectories and write its learning curve:
-#   results/trueadapt_from_scratch/<experiment>_seed<S>.csv and <experiment>_seed<S>_pybullet_metrics.json
+#   results/trueadapt_from_scratch/<experiment>_seed<S>.csv (+ .json, tools/lab/curve_summary.py) and
+#   <experiment>_seed<S>_pybullet_metrics.json
 # usage: tools/lab/trueadapt_scratch_queue.sh EXPERIMENT:SEED [EXPERIMENT:SEED ...]
 # Needs data/iiwa7/trueadapt_on_plate (pathrl-dataset generate robot=iiwa7 dataset=trueadapt_on_plate).
 set -euo pipefail
@@ -17,15 +18,7 @@ for job in "$@"; do
   resume=false; [[ -d $run ]] && resume=true
   echo "$(date -u +%H:%M) $job: train (resume=$resume)"
   OMP_NUM_THREADS=1 .venv/bin/pathrl-train +experiment="$exp" seed="$seed" threads=1 resume=$resume
-  $PY - "$run" "$OUT/${exp}_seed${seed}.csv" <<'PYEOF'
-import sys
-from pathlib import Path
-from pathrl.storage.atomic import atomic_write
-from pathrl.train.ship import curve_csv, read_training_log, training_curve
-run = Path(sys.argv[1])
-per_iter, msgs = read_training_log(run, 10**9)
-atomic_write(Path(sys.argv[2]), curve_csv(training_curve(per_iter, msgs)))
-PYEOF
+  $PY tools/lab/curve_summary.py "$run" "$OUT" --paper-steps 32e6 --what "TrueAdapt from scratch: $exp seed $seed"
   echo "$(date -u +%H:%M) $job: evaluate"
   OMP_NUM_THREADS=1 $PY tools/trueadapt_eval.py --run "$run" --dataset datasets/iiwa7/trueadapt_on_plate \
     --episodes 1000 --backend pybullet --workers 1 --out "$run/eval_pybullet"
