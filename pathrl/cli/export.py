@@ -50,10 +50,9 @@ def _config(argv: list[str]) -> dict[str, Any]:
 
 
 def _main(argv: list[str]) -> None:
-    from pathrl.dataset.io import DatasetError, load_pathset
+    from pathrl.dataset.io import DatasetError
     from pathrl.deploy.export import export_policy
-    from pathrl.envs.registry import EnvRequest, get_task
-    from pathrl.paths.knots import KnotStrategy
+    from pathrl.envs.registry import EnvRequest, get_task, tracking_paths
     from pathrl.robot.model import load_robot
     from pathrl.runs import RunError, load_run, policy_scale
 
@@ -83,8 +82,7 @@ def _main(argv: list[str]) -> None:
     if args["dataset"]["path"] is None and not Path(ds).is_dir():
         ds = str(Path("datasets") / robot.name / cfg["dataset"]["name"])
     try:
-        paths = load_pathset(ds, "test", KnotStrategy.from_cfg(cfg["knots"]), robot=robot,
-                             out_of_limits=cfg["dataset"].get("out_of_limits", "refuse"))  # as the run was trained
+        paths = tracking_paths(cfg, "test", ds, robot)  # the env's paths, by the rule the run was trained with
     except (DatasetError, OSError) as exc:
         raise UserError(str(exc).splitlines()[0] if str(exc) else repr(exc)) from None
     request = EnvRequest("test", num_envs=min(8, paths.num_paths), seed=0, knot_gap_norm=gap, paths=paths, robot=robot)

@@ -31,7 +31,7 @@ from pathrl.robot.kinematics import ForwardKinematics
 from pathrl.robot.model import RobotSpec, load_robot
 
 __all__ = ["EVAL_ENV", "FEEDBACKS", "FEEDBACK_BACKENDS", "TASKS", "EnvRequest", "Task", "check_task", "get_task",
-           "make_env", "make_feedback", "task_cfg", "task_names"]
+           "make_env", "make_feedback", "task_cfg", "task_names", "tracking_paths"]
 
 #: The feedback sources a task may name (``task.feedback``) and the simulators behind them (``task.backend``).
 FEEDBACKS = ("ball_on_plate", "standing")
@@ -121,18 +121,26 @@ def make_feedback(cfg: dict[str, Any], robot: RobotSpec, num_envs: int, seed: in
     raise ValueError(f"task.backend: expected one of {list(FEEDBACK_BACKENDS)}, got {backend!r}")
 
 
+def tracking_paths(cfg: dict[str, Any], split: str, dataset_path: str | None = None,
+                   robot: RobotSpec | None = None) -> PathSet:
+    """The paths of `split` a tracking env of run config `cfg` is built on: `dataset_path` (default the config's
+    ``dataset.path``) under the run's knot strategy and its ``dataset.out_of_limits`` rule (as it was trained).
+    DatasetError / OSError on a bad dataset."""
+    from pathrl.dataset.io import load_pathset
+    from pathrl.paths.knots import KnotStrategy
+
+    return load_pathset(dataset_path or cfg["dataset"]["path"], split, KnotStrategy.from_cfg(cfg["knots"]),
+                        robot=robot or load_robot(cfg["robot"]),
+                        out_of_limits=str(cfg["dataset"].get("out_of_limits", "refuse")))
+
+
 def _build_tracking(cfg: dict[str, Any], req: EnvRequest):
     """A :class:`PathTrackingEnv` (with the task's feedback source, if any) on the requested paths."""
-    from pathrl.dataset.io import load_pathset
     from pathrl.envs.tracking import PathTrackingEnv
-    from pathrl.paths.knots import KnotStrategy
     from pathrl.sim.feedback import FrozenSensor
 
     robot = req.robot or load_robot(cfg["robot"])
-    paths = req.paths
-    if paths is None:
-        paths = load_pathset(req.dataset_path or cfg["dataset"]["path"], req.split, KnotStrategy.from_cfg(cfg["knots"]),
-                             robot=robot, out_of_limits=str(cfg["dataset"].get("out_of_limits", "refuse")))
+    paths = req.paths if req.paths is not None else tracking_paths(cfg, req.split, req.dataset_path, robot)
     env_cfg = replace(TrackingEnvCfg.from_run(cfg, req.num_envs, req.seed, req.knot_gap_norm), **dict(req.overrides))
     # the env's one kinematics object, shared with its feedback; without a feedback the env builds it when first used
     fk = ForwardKinematics(robot, device=env_cfg.device) if task_cfg(cfg)["feedback"] is not None else None

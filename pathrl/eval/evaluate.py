@@ -13,7 +13,7 @@ import torch
 
 from pathrl.config.paper import load as load_paper
 from pathrl.dataset.io import load_pathset
-from pathrl.envs.registry import EVAL_ENV, EnvRequest, make_env, task_cfg
+from pathrl.envs.registry import EVAL_ENV, EnvRequest, make_env, task_cfg, tracking_paths
 from pathrl.envs.terminations import TerminationReason
 from pathrl.envs.tracking import PathTrackingEnv
 from pathrl.eval.metrics import METRIC_KEYS, matched_samples, per_joint_errors, sample_deviations
@@ -126,7 +126,7 @@ def evaluate(run_dir: Path, opts: EvalOptions = EvalOptions()) -> dict[str, Any]
         episodes = paths.num_paths if opts.segments == "full" else int(load_paper("tracking").value("episodes"))
     plan = evaluation_plan(paths, episodes, opts.segments, opts.seed)
     if gap is None:  # a controller's directory without a summary: D of its training split, as in training
-        gap = load_pathset(cfg["dataset"]["path"], "train", knots, robot=robot).max_knot_gap()
+        gap = tracking_paths(cfg, "train", robot=robot).max_knot_gap()
     # The deviation cut-off is a training device; evaluation tracks every episode to its end or budget (EVAL_ENV).
     has_task = task_cfg(cfg)["feedback"] is not None
     num_envs = opts.num_envs
