@@ -21,7 +21,7 @@ from pathrl.envs.path_change_cfg import PathChangeCfg
 from pathrl.envs.tracking_cfg import EnvSettings
 
 __all__ = [
-    "CriticWarmupCfg", "DatasetAppCfg", "DatasetCfg", "EvalAppCfg", "EvalDatasetCfg", "ExportAppCfg",
+    "BallCurriculumCfg", "CriticWarmupCfg", "DatasetAppCfg", "DatasetCfg", "EvalAppCfg", "EvalDatasetCfg", "ExportAppCfg",
     "ExportDatasetCfg", "KnotsCfg", "LrDecayCfg", "RewardCfg", "RobotCfg", "StdAnnealCfg", "TaskCfg", "TcpCfg",
     "ToppraAppCfg", "TrainAppCfg", "WorkspaceCfg", "config_dict", "train_app_cfg",
 ]
@@ -175,6 +175,18 @@ class RewardCfg:
 
 
 @dataclass
+class BallCurriculumCfg:
+    """A curriculum on the ball (``task.curriculum``; analytic ball, training only): new balls start with their
+    rolling friction multiplied by ``friction_scale`` and their start position by ``start_spread`` (0: the plate's
+    centre); both move log-linearly (friction) and linearly (spread) to the task's own values (1, 1) at iteration
+    ``iterations``, and stay there. It depends only on the iteration, so a resumed run continues it."""
+
+    iterations: int = 1000
+    friction_scale: float = 1.0  # >= 1: balls that roll less at first
+    start_spread: float = 1.0  # in [0, 1]: balls that start nearer the centre at first
+
+
+@dataclass
 class TaskCfg:
     """Sensory-feedback task (``conf/task/*.yaml``): ``feedback: null`` is plain path tracking."""
 
@@ -187,6 +199,7 @@ class TaskCfg:
     imu: bool = False  # ball_on_plate: the plate's inertial sensor reading joins the state (feedback.PlateIMU)
     critic_obs: bool = False  # an asymmetric critic: a privileged group "critic" (PathTrackingEnv.critic_observation)
     adapt: dict[str, Any] = field(default_factory=dict)  # TrueAdapt task settings (pathrl.envs.trueadapt); {}: none
+    curriculum: BallCurriculumCfg | None = None  # ball_on_plate, analytic: easier balls first (BallCurriculumCfg)
 
 
 @dataclass

@@ -262,6 +262,18 @@ class AnalyticBall:
         self.edge = torch.tensor(PLATE_SIZE[:2], **f64) / 2.0
         self.g = torch.tensor([0.0, 0.0, -GRAVITY], **f64)
 
+    #: Curriculum scales of new balls (:meth:`set_curriculum`): rolling friction x roll_scale, start x start_spread.
+    roll_scale: float = 1.0
+    start_spread: float = 1.0
+
+    def set_curriculum(self, roll_scale: float, start_spread: float) -> None:
+        """Balls drawn from now on: rolling friction times `roll_scale` (>= 1), start position times `start_spread`
+        (in [0, 1]; 0 is the plate's centre). (1, 1) is the authors' randomization."""
+        if roll_scale < 1.0 or not 0.0 <= start_spread <= 1.0:
+            raise ValueError(f"ball curriculum: roll_scale >= 1 and start_spread in [0, 1], got {roll_scale}, "
+                             f"{start_spread}")
+        self.roll_scale, self.start_spread = float(roll_scale), float(start_spread)
+
     def plate_pose(self, q: Tensor) -> tuple[Tensor, Tensor]:
         """:func:`plate_pose` of this model's robot."""
         return plate_pose(self.fk, q)
@@ -272,10 +284,10 @@ class AnalyticBall:
         if len(env_ids) == 0:
             return
         k = len(env_ids)
-        self.xy[env_ids] = sample_ball_xy(k, self.generator, self.device)
+        self.xy[env_ids] = sample_ball_xy(k, self.generator, self.device) * self.start_spread
         self.vxy[env_ids] = 0.0
         self.radius[env_ids] = sample_ball_radius(k, self.generator, self.device)
-        self.roll_mu[env_ids] = sample_rolling_friction(k, self.generator, self.device)
+        self.roll_mu[env_ids] = sample_rolling_friction(k, self.generator, self.device) * self.roll_scale
         self.on[env_ids] = True
         o, r = self.plate_pose(q)
         self.hist_o[env_ids] = o.unsqueeze(1).expand(k, 2, 3)

@@ -1,0 +1,52 @@
+"""The curriculum on the ball (``task.curriculum``): its schedule by hand, its effect on new balls, and a tiny
+training run with it (and the one-line refusal without an analytic ball to apply it to)."""
+
+import math
+
+import pytest
+import torch
+
+from pathrl.robot.external import load_robot_by_name
+from pathrl.schema import BallCurriculumCfg
+from pathrl.sim.feedback import AnalyticBall
+from pathrl.train.runner import curriculum_scales
+from tests.test_train import run, train_cmd
+
+
+def test_schedule_by_hand():
+    cur = BallCurriculumCfg(iterations=100, friction_scale=100.0, start_spread=0.2)
+    assert curriculum_scales(0, cur) == pytest.approx((100.0, 0.2))
+    # half way: log-linear friction 100 ** 0.5 = 10, linear spread 0.2 + 0.8 * 0.5 = 0.6
+    assert curriculum_scales(50, cur) == pytest.approx((10.0, 0.6))
+    assert curriculum_scales(100, cur) == pytest.approx((1.0, 1.0))
+    assert curriculum_scales(5000, cur) == pytest.approx((1.0, 1.0))  # and stays there
+
+
+def test_new_balls_follow_the_curriculum():
+    iiwa = load_robot_by_name("iiwa7")
+    q = torch.zeros(64, 7, dtype=torch.float64)
+    ids = torch.arange(64)
+    ball = AnalyticBall(iiwa, 64, seed=0)
+    ball.reset(ids, q)
+    authors_mu, authors_xy = ball.roll_mu.clone(), ball.xy.clone()
+    assert float(authors_xy.abs().max()) > 0.01  # spread over the placement area
+    assert 1e-4 <= float(authors_mu.min()) and float(authors_mu.max()) <= 7e-4
+    again = AnalyticBall(iiwa, 64, seed=0)
+    again.set_curriculum(30.0, 0.0)
+    again.reset(ids, q)
+    # the same draws, scaled: every ball at the centre, 30x the rolling friction
+    assert torch.equal(again.xy, torch.zeros_like(again.xy))
+    assert torch.allclose(again.roll_mu, 30.0 * authors_mu)
+    with pytest.raises(ValueError, match="roll_scale"):
+        again.set_curriculum(0.5, 0.0)
+    assert math.isclose(again.roll_scale, 30.0)  # a refused setting changes nothing
+
+
+def test_tiny_training_with_the_curriculum_and_its_refusal(tiny_dataset, tmp_path):
+    exp, cur = "+experiment=iiwa7_ball_balancing_reward_scratch_curriculum", "task.curriculum.iterations=2"
+    r = run(train_cmd(tiny_dataset, tmp_path / "cur", 2, exp, cur))
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert (tmp_path / "cur" / "model_1.pt").exists()
+    r = run(train_cmd(tiny_dataset, tmp_path / "pb", 1, exp, cur, "task.backend=pybullet"))
+    assert r.returncode != 0
+    assert "task.curriculum needs the analytic ball" in r.stderr.strip().splitlines()[-1]
