@@ -94,14 +94,13 @@ def test_every_shipped_and_default_agent_config_passes_the_checks():
 
 def test_evaluating_a_shipped_model_writes_outside_models(tmp_path, monkeypatch, capsys):
     """``pathrl-eval run_dir=models/<family>/<name>`` once replaced a committed 1200-episode metrics.json with a
-    5-episode
-    one; now its output goes to runs/eval/<name>, and into models/ only with write_models=true."""
+    5-episode one; now its output goes to runs/eval/<name>, and into models/ only with write_models=true."""
     from pathrl.cli.evaluate import main
 
     monkeypatch.chdir(tmp_path)
     models = ROOT / "models"
     before = _listing(models)
-    args = [f"run_dir={models / 'iiwa7_random'}", "episodes=2", "record=false", "num_envs=2",
+    args = [f"run_dir={model_dir('iiwa7_random')}", "episodes=2", "record=false", "num_envs=2",
             f"dataset.path={ROOT / 'datasets' / 'iiwa7' / 'random'}"]
     assert main(args) == 0
     m = json.loads((tmp_path / "runs" / "eval" / "iiwa7_random" / "metrics.json").read_text())

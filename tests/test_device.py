@@ -32,7 +32,7 @@ from pathrl.envs.device import (
 )
 from pathrl.envs.registry import EVAL_ENV, EnvRequest, make_env
 from pathrl.envs.state import restore, snapshot
-from pathrl.models import model_dir
+from pathrl.models import model_dir, model_ref
 from pathrl.policy.residual import ControllerObs
 from pathrl.train import device_check as dc
 from pathrl.train import placement
@@ -359,7 +359,7 @@ def test_a_gpu_trained_trueadapt_policy_is_timed_on_the_cpu(tiny_trueadapt, tmp_
 
 
 # ------------------------------------------------------------------------------------------- tools/gpu_check.py
-BARE = ("pathrl", "conf", "pyproject.toml", "tools/gpu_check.py", f"models/{MODEL.name}")
+BARE = ("pathrl", "conf", "pyproject.toml", "tools/gpu_check.py", model_ref(MODEL.name))
 
 
 def test_gpu_check_dry_run_from_a_bare_copy(tmp_path):
@@ -378,7 +378,7 @@ def test_gpu_check_dry_run_from_a_bare_copy(tmp_path):
     size = sum(p.stat().st_size for p in copy.rglob("*") if p.is_file())
     assert size < 6e6, size
     env = {**os.environ, "OMP_NUM_THREADS": "1", "PYTHONPATH": str(copy)}
-    cmd = [sys.executable, "tools/gpu_check.py", "--dry-run", "--install", "--model", f"models/{MODEL.name}"]
+    cmd = [sys.executable, "tools/gpu_check.py", "--dry-run", "--install", "--model", model_ref(MODEL.name)]
     r = subprocess.run(cmd, cwd=copy, env=env, capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]
     assert "would run:" in r.stdout and "--index-url https://download.pytorch.org/whl/cu126" in r.stdout

@@ -190,10 +190,11 @@ RECEIPTS: list[Receipt] = [
     R(README, "(`models/tracking/iiwa7_random`) | 3.91 | 0.100 | 2.92 / 6.96 | 0 |",
       *[raw("iiwa7_random", k) for k in ("duration_s", "joint_dev_mean_rad", "cart_pos_dev_mean_cm",
                                          "cart_pos_dev_max_cm", "limit_violations")]),
-    R(README, "path length weight 6, then 9 (`models/tracking/iiwa7_random_fast`) | 3.63 | 0.116 | 3.31 / 7.92 | 0 |",
-      cfg("iiwa7_random_continue", "reward.terms.path_length.weight"),
-      cfg("iiwa7_random_fast", "reward.terms.path_length.weight"),
-      *[rcp("iiwa7_random_fast", k) for k in ("duration_s", "joint_dev_mean_rad", "cart_pos_dev_mean_cm",
+    R(README, "path length weight 6, then 9 (`models/tracking/iiwa7_random_length9`) | 3.63 | 0.116 | 3.31 / 7.92 | "
+              "0 |",
+      cfg("iiwa7_random_length6", "reward.terms.path_length.weight"),
+      cfg("iiwa7_random_length9", "reward.terms.path_length.weight"),
+      *[rcp("iiwa7_random_length9", k) for k in ("duration_s", "joint_dev_mean_rad", "cart_pos_dev_mean_cm",
                                               "cart_pos_dev_max_cm", "limit_violations")]),
     R(README, "| 4.81 | 0.086 | 2.52 / 6.06 | 0 |",
       *[raw("iiwa7_random_length_eq_deviation", k) for k in ("duration_s", "joint_dev_mean_rad",
@@ -205,7 +206,7 @@ RECEIPTS: list[Receipt] = [
     R(README, "the student is 1.12x TOPP-RA",
       ratio(t("I", "iiwa7/random", "duration_s"), t("VI", "iiwa7/random", "toppra_duration_s"))),
     R(README, "the best PPO policy 1.22x",
-      ratio(rcp("iiwa7_random_fast", "duration_s"), t("VI", "iiwa7/random", "toppra_duration_s"))),
+      ratio(rcp("iiwa7_random_length9", "duration_s"), t("VI", "iiwa7/random", "toppra_duration_s"))),
     R(README, "1.99 s at 0.75 cm, by PPO 2.15 s at\n2.93 cm, paper 2.44 s at 1.4 cm",
       t("I", "iiwa7/ball_balancing", "duration_s"), t("I", "iiwa7/ball_balancing", "cart_pos_dev_mean_cm"),
       rcp("iiwa7_ball_balancing_length_lt", "duration_s"), rcp("iiwa7_ball_balancing_length_lt",
@@ -265,9 +266,9 @@ RECEIPTS: list[Receipt] = [
 # docs/results.md
 I_ROWS = ("iiwa7/random", "iiwa7/target_point", "iiwa7/ball_balancing", "armar6/random", "armar4_fixed/random",
           "armar4_fixed/target_point")
-PPO_BEST = {"iiwa7/random": "iiwa7_random_fast", "iiwa7/target_point": "iiwa7_target_point",
-            "iiwa7/ball_balancing": "iiwa7_ball_balancing_length_lt", "armar6/random": "armar6_random_continue",
-            "armar4_fixed/random": "armar4_random_bias", "armar4_fixed/target_point": "armar4_target_point_faster"}
+PPO_BEST = {"iiwa7/random": "iiwa7_random_length9", "iiwa7/target_point": "iiwa7_target_point",
+            "iiwa7/ball_balancing": "iiwa7_ball_balancing_length_lt", "armar6/random": "armar6_random_length05",
+            "armar4_fixed/random": "armar4_random_bias", "armar4_fixed/target_point": "armar4_target_point_length8"}
 
 
 def vs_toppra(row: str) -> Source:
@@ -355,18 +356,20 @@ RECEIPTS += [
       const(200, "where the quoted range starts"),
       ttq_after("duration_s", min), ttq_after("duration_s", max),
       ttq_after("cart_pos_dev_mean_cm", min), ttq_after("cart_pos_dev_mean_cm", max)),
-    R(RES, "the best was 1.22 at 3.3 cm (`models/tracking/iiwa7_random_fast`, 3.63 s)", ppo_vs_toppra("iiwa7/random"),
-      rcp("iiwa7_random_fast", "cart_pos_dev_mean_cm"), rcp("iiwa7_random_fast", "duration_s")),
-    R(RES, "(1.32 at 2.9 cm) trained on at path-length weight 6 (`models/tracking/iiwa7_random_continue`, 300 "
+    R(RES, "the best was 1.22 at 3.3 cm (`models/tracking/iiwa7_random_length9`, 3.63 s)",
+      ppo_vs_toppra("iiwa7/random"),
+      rcp("iiwa7_random_length9", "cart_pos_dev_mean_cm"), rcp("iiwa7_random_length9", "duration_s")),
+    R(RES, "(1.32 at 2.9 cm) trained on at path-length weight 6 (`models/tracking/iiwa7_random_length6`, 300 "
            "iterations, 8 "
       "min: "
            "1.28 at\n3.0 cm), then at weight 9 with the action noise annealed to 0.01 (200 iterations: 1.22)",
       ratio(raw("iiwa7_random", "duration_s"), t("VI", "iiwa7/random", "toppra_duration_s")),
-      raw("iiwa7_random", "cart_pos_dev_mean_cm"), cfg("iiwa7_random_continue", "reward.terms.path_length.weight"),
-      summary("iiwa7_random_continue", "iterations"), minutes("iiwa7_random_continue"),
-      ratio(rcp("iiwa7_random_continue", "duration_s"), t("VI", "iiwa7/random", "toppra_duration_s")),
-      rcp("iiwa7_random_continue", "cart_pos_dev_mean_cm"), cfg("iiwa7_random_fast", "reward.terms.path_length.weight"),
-      cfg("iiwa7_random_fast", "std_anneal.final"), summary("iiwa7_random_fast", "iterations"),
+      raw("iiwa7_random", "cart_pos_dev_mean_cm"), cfg("iiwa7_random_length6", "reward.terms.path_length.weight"),
+      summary("iiwa7_random_length6", "iterations"), minutes("iiwa7_random_length6"),
+      ratio(rcp("iiwa7_random_length6", "duration_s"), t("VI", "iiwa7/random", "toppra_duration_s")),
+      rcp("iiwa7_random_length6", "cart_pos_dev_mean_cm"),
+      cfg("iiwa7_random_length9", "reward.terms.path_length.weight"),
+      cfg("iiwa7_random_length9", "std_anneal.final"), summary("iiwa7_random_length9", "iterations"),
       ppo_vs_toppra("iiwa7/random")),
     R(RES, "The default reward weights path length 4.0 against deviation 0.9 + 0.9",
       cfg("iiwa7_random", "reward.terms.path_length.weight"), cfg("iiwa7_random", "reward.terms.deviation_max.weight"),
@@ -443,9 +446,9 @@ RECEIPTS += [
     R(RES, "500 iterations at\npath-length weight 2, then 300 more at 0.5, 55 min in all): 4.54 s at 6.0 cm, 1.57x "
       "TOPP-RA.",
       summary("armar6_random", "iterations"), cfg("armar6_random", "reward.terms.path_length.weight"),
-      summary("armar6_random_continue", "iterations"), cfg("armar6_random_continue", "reward.terms.path_length.weight"),
-      minutes("armar6_random", "armar6_random_continue"), rcp("armar6_random_continue", "duration_s"),
-      rcp("armar6_random_continue", "cart_pos_dev_mean_cm"), ppo_vs_toppra("armar6/random")),
+      summary("armar6_random_length05", "iterations"), cfg("armar6_random_length05", "reward.terms.path_length.weight"),
+      minutes("armar6_random", "armar6_random_length05"), rcp("armar6_random_length05", "duration_s"),
+      rcp("armar6_random_length05", "cart_pos_dev_mean_cm"), ppo_vs_toppra("armar6/random")),
     R(RES, "ARMAR-4 random, the Table I row: **3.27 s at 1.77 cm**, 1.15x TOPP-RA, 0 violations\n(paper 5.09 s at 3.3 "
       "cm; "
            "second test split 3.25 s at 1.76 cm)", *row_I("armar4_fixed/random", "armar4_random_track_distill"),
@@ -505,11 +508,11 @@ RECEIPTS += [
       p("I", "armar4_fixed/target_point", "duration_s"), p("I", "armar4_fixed/target_point", "cart_pos_dev_mean_cm")),
     R(RES, "re-exploring at path-length weight 6", cfg("armar4_target_point_fast", "reward.terms.path_length.weight")),
     R(RES, "`_fast_continue2`, `_fast_continue3`: 5.54 s at 3.67 cm, then the path length weighted 8 for\n"
-           "`models/tracking/armar4_target_point_faster`): 5.48 s at 3.75 cm, 1.57x TOPP-RA",
+           "`models/tracking/armar4_target_point_length8`): 5.48 s at 3.75 cm, 1.57x TOPP-RA",
       raw("armar4_target_point_fast_continue3", "duration_s"), raw("armar4_target_point_fast_continue3",
       "cart_pos_dev_mean_cm"),
-      cfg("armar4_target_point_faster", "reward.terms.path_length.weight"),
-      rcp("armar4_target_point_faster", "duration_s"), rcp("armar4_target_point_faster", "cart_pos_dev_mean_cm"),
+      cfg("armar4_target_point_length8", "reward.terms.path_length.weight"),
+      rcp("armar4_target_point_length8", "duration_s"), rcp("armar4_target_point_length8", "cart_pos_dev_mean_cm"),
       ppo_vs_toppra("armar4_fixed/target_point")),
     R(RES, "with fixed legs it falls in 10.5 % of 200\nepisodes (paper 26 %, Table VIII)",
       t("VIII", "fixed_legs/no_balancing_reward", "fell_pct"),
@@ -675,7 +678,7 @@ RECEIPTS += [
         for s in (t("I", r, "duration_s"), t("I", r, "cart_pos_dev_mean_cm"), t("VI", r, "greedy_duration_s"),
                   raw(GREEDY_RAW[r], "cart_pos_dev_mean_cm"))]),
     R(RES, "(ARMAR-6: 4.54 s at 6.0 cm, ARMAR-4 random: 4.66 s at 2.7 cm by PPO)",
-      rcp("armar6_random_continue", "duration_s"), rcp("armar6_random_continue", "cart_pos_dev_mean_cm"),
+      rcp("armar6_random_length05", "duration_s"), rcp("armar6_random_length05", "cart_pos_dev_mean_cm"),
       rcp("armar4_random_bias", "duration_s"), rcp("armar4_random_bias", "cart_pos_dev_mean_cm")),
     # path changes
     R(RES, "1-4 s into a test path", raw("path_change_iiwa7_random.json", "switch_range_s.0"),

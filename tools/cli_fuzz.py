@@ -196,7 +196,7 @@ def _episode_json(knots, scale: float = 1.0) -> str:
 
 def _model_copy(dest: Path, summary: dict | None) -> None:
     """models/tracking/iiwa7_random at `dest`, its summary.json replaced by `summary` (None: removed)."""
-    shutil.copytree(ROOT / "models" / "iiwa7_random", dest)
+    shutil.copytree(ROOT / "models" / "tracking" / "iiwa7_random", dest)
     (dest / "summary.json").unlink()
     if summary is not None:
         (dest / "summary.json").write_text(json.dumps(summary))

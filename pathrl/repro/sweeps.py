@@ -153,9 +153,8 @@ def _init_from(experiments: dict[str, dict[str, Any]], name: str, seen: tuple[st
 
 
 def warm_starts(experiment_dir: Path) -> dict[str, str]:
-    """``{experiment: source}`` for every experiment trained from a shipped policy (``init_from:
-    models/<family>/<source>``,
-    its own or inherited through its defaults list), in file-name order."""
+    """``{experiment: source}`` for every experiment trained from a shipped policy
+    (``init_from: models/<family>/<source>``, its own or inherited through its defaults list), in file-name order."""
     experiments = {p.stem: _read(p) or {} for p in sorted(experiment_dir.glob("*.yaml"))}
     out: dict[str, str] = {}
     for name in experiments:
