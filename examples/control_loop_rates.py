@@ -1,7 +1,7 @@
 """A robot's control loop at 100 Hz or 500 Hz around a shipped policy: setpoints at the loop's rate, a measured
 position fed back every decision, the path ending on its last waypoint at rest.
 
-    .venv/bin/python examples/control_loop_rates.py [100|500] [models/iiwa7_random] [datasets/iiwa7/random]
+    .venv/bin/python examples/control_loop_rates.py [100|500] [models/tracking/iiwa7_random] [datasets/iiwa7/random]
 
 Every 0.1 s the follower decides and returns the next 0.1 s of setpoints at the loop's rate (10 at 100 Hz, 50 at
 500 Hz): the env's trajectory sampled exactly at that rate. Here a stand-in robot tracks them with a small lag
@@ -24,7 +24,8 @@ from pathrl.limits.check import limit_violations
 from pathrl.limits.feasible import JointLimits
 
 
-def main(rate: str = "500", model: str = "models/iiwa7_random", dataset: str = "datasets/iiwa7/random") -> None:
+def main(rate: str = "500", model: str = "models/tracking/iiwa7_random",
+         dataset: str = "datasets/iiwa7/random") -> None:
     rate_hz = float(rate)
     follower = Follower.load(model, control_rate=rate_hz)
     knots = load_dataset(dataset, follower.robot).splits["test"].knots[0]

@@ -1,6 +1,6 @@
 """A 10 Hz control loop around a shipped policy: follow one test path, switch to another one halfway.
 
-    .venv/bin/python examples/follow_loop.py [models/iiwa7_random] [datasets/iiwa7/random]
+    .venv/bin/python examples/follow_loop.py [models/tracking/iiwa7_random] [datasets/iiwa7/random]
 
 Each decision returns the next 0.1 s of setpoints at 240 Hz (what a robot controller consumes); halfway along
 the first path the follower is handed a new path that runs straight from where the robot is to the start of a
@@ -18,7 +18,7 @@ from pathrl.dataset.io import load_dataset
 from pathrl.deploy import Follower
 
 
-def main(model: str = "models/iiwa7_random", dataset: str = "datasets/iiwa7/random") -> None:
+def main(model: str = "models/tracking/iiwa7_random", dataset: str = "datasets/iiwa7/random") -> None:
     follower = Follower.load(model)
     paths = load_dataset(dataset, follower.robot).splits["test"].knots
     follower.reset(paths[0])

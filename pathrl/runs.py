@@ -23,6 +23,7 @@ from tensordict import TensorDict
 from pathrl.baselines.controllers import controller_cfg
 from pathrl.config.migrate import migrate
 from pathrl.envs.tracking import PathTrackingEnv
+from pathrl.models import regrouped
 from pathrl.policy import MixedPrecisionMLPModel, policy_role
 from pathrl.policy.residual import BASE_GROUP, ResidualPolicy, check_residual_cfg
 from pathrl.policy.widen import LayoutError, actor_for_joints
@@ -54,7 +55,9 @@ def load_run(run_dir: Path) -> tuple[dict[str, Any], Path | None, dict[str, Any]
     A model-based controller's directory (``controller:`` in its config) has no checkpoint (None)."""
     run_dir = Path(run_dir)
     if not run_dir.is_dir():
-        raise RunError(f"run_dir not found: {run_dir}")
+        moved = regrouped(run_dir)
+        hint = f" (shipped models are grouped by family: {moved})" if moved else ""
+        raise RunError(f"run_dir not found: {run_dir}{hint}")
     cfg_path = run_dir / "config.yaml"
     if not cfg_path.is_file():
         raise RunError(f"{cfg_path} missing: not a pathrl run or model directory")

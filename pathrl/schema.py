@@ -137,7 +137,7 @@ class EvalAppCfg:
     episodes: int | None = None  # default: paths of the split (full) or 1200 (paper)
     segments: str = "paper"  # paper | full
     seed: int = 0
-    out: str | None = None  # directory of metrics.json / episodes.mcap; default: run_dir (models/<x>: runs/eval/<x>)
+    out: str | None = None  # metrics.json / episodes.mcap; default: run_dir (models/<family>/<x>: runs/eval/<x>)
     write_models: bool = False  # allow `out` inside models/ (shipped policies are not written to unless asked)
     record: bool = True
     num_envs: int = 1200

@@ -153,13 +153,13 @@ def test_the_shipped_controller_evaluates_like_a_policy(tmp_path):
     from pathrl.cli.evaluate import main
 
     out = tmp_path / "eval"
-    assert main(["run_dir=models/iiwa7_ball_tray_controller", f"dataset.path={DATASET}", "segments=full",
+    assert main(["run_dir=models/tracking/iiwa7_ball_tray_controller", f"dataset.path={DATASET}", "segments=full",
                  "episodes=4", "backend=analytic", f"out={out}", "record=false"]) == 0
     import json
 
     m = json.loads((out / "metrics.json").read_text())
     assert m["checkpoint"] is None and m["task"]["open_loop"] is False and "ball_fell_pct" in m
-    assert main(["run_dir=models/iiwa7_ball_tray_controller", f"dataset.path={DATASET}", "segments=full",
+    assert main(["run_dir=models/tracking/iiwa7_ball_tray_controller", f"dataset.path={DATASET}", "segments=full",
                  "episodes=4", "backend=analytic", f"out={out}", "record=false", "open_loop=true"]) == 0
     assert json.loads((out / "metrics.json").read_text())["task"]["open_loop"] is True
 
@@ -167,7 +167,7 @@ def test_the_shipped_controller_evaluates_like_a_policy(tmp_path):
 def test_open_loop_without_a_task_is_one_line_error(capsys):
     from pathrl.cli.evaluate import main
 
-    assert main(["run_dir=models/iiwa7_random", "episodes=2", "open_loop=true",
+    assert main(["run_dir=models/tracking/iiwa7_random", "episodes=2", "open_loop=true",
                  f"dataset.path={ROOT / 'datasets' / 'iiwa7' / 'random'}"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "no feedback task" in err[0]

@@ -13,13 +13,14 @@ from pathlib import Path
 import pytest
 import torch
 from test_storage import _flip_tensor_bytes
-from test_train import ROOT, run, train_cmd
+from test_train import run, train_cmd
 
 from pathrl.cli import evaluate as eval_cli
 from pathrl.cli import export as export_cli
 from pathrl.cli import toppra as toppra_cli
 from pathrl.dataset.io import save_dataset
 from pathrl.dataset.synthetic import smooth_paths
+from pathrl.models import model_dir
 from pathrl.robot.external import load_robot_by_name
 
 #: (overrides, separated by spaces; expected text in the one line)
@@ -122,7 +123,7 @@ def test_toppra_on_paths_outside_the_limits(off_limits_dataset, tmp_path, capsys
 
 def _model_copy(tmp_path: Path) -> Path:
     model = tmp_path / "model"
-    shutil.copytree(ROOT / "models" / "iiwa7_random", model)
+    shutil.copytree(model_dir("iiwa7_random"), model)
     return model
 
 
@@ -164,14 +165,14 @@ def test_eval_damaged_model(case, tmp_path, capsys):
 
 
 @pytest.mark.parametrize("argv, msg", [
-    (["run_dir=models/iiwa7_random", "num_envs=0"], "num_envs must be >= 1"),
-    (["run_dir=models/iiwa7_random", "episodes=zero"], "integer"),
+    (["run_dir=models/tracking/iiwa7_random", "num_envs=0"], "num_envs must be >= 1"),
+    (["run_dir=models/tracking/iiwa7_random", "episodes=zero"], "integer"),
     (["run_dir=models/nope"], "not found"),
-    (["run_dir=models/iiwa7_random", "segments=some"], "segments must be"),
-    (["run_dir=models/iiwa7_random", "dataset.out_of_limits=ignore", "episodes=1"], "must be refuse or clip"),
-    (["run_dir=models/iiwa7_random", "bogus=1"], "unknown argument"),
-    (["run_dir=models/iiwa7_random", "~num_envs=1200"], "unknown argument '~num_envs'"),
-    (["run_dir=models/iiwa7_random", "+seed=1"], "unknown argument '+seed'"),
+    (["run_dir=models/tracking/iiwa7_random", "segments=some"], "segments must be"),
+    (["run_dir=models/tracking/iiwa7_random", "dataset.out_of_limits=ignore", "episodes=1"], "must be refuse or clip"),
+    (["run_dir=models/tracking/iiwa7_random", "bogus=1"], "unknown argument"),
+    (["run_dir=models/tracking/iiwa7_random", "~num_envs=1200"], "unknown argument '~num_envs'"),
+    (["run_dir=models/tracking/iiwa7_random", "+seed=1"], "unknown argument '+seed'"),
 ])
 def test_eval_bad_arguments(argv, msg, tmp_path, capsys):
     assert eval_cli.main([*argv, f"out={tmp_path / 'out'}"]) == 2
@@ -180,14 +181,14 @@ def test_eval_bad_arguments(argv, msg, tmp_path, capsys):
 
 
 @pytest.mark.parametrize("argv, msg", [
-    (["run_dir=models/iiwa7_random", "observations=0"], "observations must be >= 1"),
-    (["run_dir=models/iiwa7_random", "observations=abc"], "observations must be an integer, got 'abc'"),
+    (["run_dir=models/tracking/iiwa7_random", "observations=0"], "observations must be >= 1"),
+    (["run_dir=models/tracking/iiwa7_random", "observations=abc"], "observations must be an integer, got 'abc'"),
     (["run_dir=models/nope"], "not found"),
-    (["run_dir=models/iiwa7_ball_tray_controller"], "no network to export"),
-    (["run_dir=models/iiwa7_random", "bogus=1"], "unknown argument 'bogus'"),
-    (["run_dir=models/iiwa7_random", "dataset=random"], "unknown argument 'dataset'"),
-    (["run_dir=models/iiwa7_random", "dataset.path=/nonexistent"], "dataset directory not found"),
-    (["models/iiwa7_random"], "expected key=value"),
+    (["run_dir=models/tracking/iiwa7_ball_tray_controller"], "no network to export"),
+    (["run_dir=models/tracking/iiwa7_random", "bogus=1"], "unknown argument 'bogus'"),
+    (["run_dir=models/tracking/iiwa7_random", "dataset=random"], "unknown argument 'dataset'"),
+    (["run_dir=models/tracking/iiwa7_random", "dataset.path=/nonexistent"], "dataset directory not found"),
+    (["models/tracking/iiwa7_random"], "expected key=value"),
     ([], "run_dir is required"),
 ])
 def test_export_bad_arguments(argv, msg, tmp_path, capsys):

@@ -13,6 +13,8 @@ from pathlib import Path
 import pytest
 import yaml
 
+from pathrl.models import model_dir
+
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tools"))
 import cli_fuzz  # noqa: E402  (tools/cli_fuzz.py: the case table and its runner)
@@ -66,7 +68,7 @@ def test_destination_checks_write_nothing(tmp_path):
     assert _listing(tmp_path) == before
     assert inside_models(tmp_path / "models" / "a" / "b", roots=[tmp_path / "models"])
     assert not inside_models(tmp_path / "models_eval", roots=[tmp_path / "models"])
-    assert inside_models(ROOT / "models" / "iiwa7_random")
+    assert inside_models(model_dir("iiwa7_random"))
 
 
 def test_hydra_quoting_and_option_lists():
@@ -82,7 +84,7 @@ def test_hydra_quoting_and_option_lists():
 def test_every_shipped_and_default_agent_config_passes_the_checks():
     from pathrl.config.agent import check_agent
 
-    configs = [yaml.safe_load(p.read_text()) for p in sorted((ROOT / "models").glob("*/config.yaml"))]
+    configs = [yaml.safe_load(p.read_text()) for p in sorted((ROOT / "models").glob("*/*/config.yaml"))]
     agents = [c["agent"] for c in configs if isinstance(c, dict) and "agent" in c]
     agents += [yaml.safe_load(p.read_text()) for p in sorted((ROOT / "conf" / "agent").glob("*.yaml"))]
     assert len(agents) > 40
@@ -91,14 +93,14 @@ def test_every_shipped_and_default_agent_config_passes_the_checks():
 
 
 def test_evaluating_a_shipped_model_writes_outside_models(tmp_path, monkeypatch, capsys):
-    """``pathrl-eval run_dir=models/<name>`` once replaced a committed 1200-episode metrics.json with a 5-episode
-    one; now its output goes to runs/eval/<name>, and into models/ only with write_models=true."""
+    """``pathrl-eval run_dir=models/<family>/<name>`` once replaced a committed 1200-episode metrics.json with a
+    5-episode one; now its output goes to runs/eval/<name>, and into models/ only with write_models=true."""
     from pathrl.cli.evaluate import main
 
     monkeypatch.chdir(tmp_path)
     models = ROOT / "models"
     before = _listing(models)
-    args = [f"run_dir={models / 'iiwa7_random'}", "episodes=2", "record=false", "num_envs=2",
+    args = [f"run_dir={model_dir('iiwa7_random')}", "episodes=2", "record=false", "num_envs=2",
             f"dataset.path={ROOT / 'datasets' / 'iiwa7' / 'random'}"]
     assert main(args) == 0
     m = json.loads((tmp_path / "runs" / "eval" / "iiwa7_random" / "metrics.json").read_text())
@@ -119,7 +121,7 @@ def test_the_library_evaluation_of_a_shipped_model_writes_outside_models(tmp_pat
     from pathrl.runs import RunError
 
     monkeypatch.chdir(tmp_path)
-    model = ROOT / "models" / "iiwa7_random"
+    model = model_dir("iiwa7_random")
     assert output_dir_of(model) == Path("runs", "eval", "iiwa7_random")
     assert output_dir_of(tmp_path / "run") == tmp_path / "run"
     assert output_dir_of(model, tmp_path / "e") == tmp_path / "e"

@@ -39,10 +39,10 @@ def test_groups_are_typed_and_bad_values_are_one_line():
 
 def test_every_shipped_policy_config_converts():
     """The migrated config of every shipped policy (controller directories have no training config) becomes the
-    typed config, e.g. the early ``critic_warmup: 0`` of models/iiwa7_ball_balancing_distill."""
+    typed config, e.g. the early ``critic_warmup: 0`` of models/tracking/iiwa7_ball_balancing_distill."""
     from pathrl.config.migrate import migrate
     from pathrl.config.paths import CONF_DIR
 
-    models = sorted((CONF_DIR.parent.parent / "models").glob("*/config.yaml"))
+    models = sorted((CONF_DIR.parent.parent / "models").glob("*/*/config.yaml"))
     policies = [cfg for cfg in (migrate(yaml.safe_load(p.read_text())) for p in models) if "controller" not in cfg]
     assert len(policies) > 50 and all(isinstance(train_app_cfg(cfg), TrainAppCfg) for cfg in policies)

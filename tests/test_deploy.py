@@ -17,11 +17,12 @@ from pathrl.envs.rewards import build_reward_terms
 from pathrl.envs.tracking import PathTrackingEnv
 from pathrl.limits.check import limit_violations
 from pathrl.limits.feasible import JointLimits
+from pathrl.models import model_dir
 from pathrl.paths.quick import quick_knots, quick_pathsets
 from pathrl.paths.segments import full_segments
 
 ROOT = Path(__file__).resolve().parents[1]
-MODEL = ROOT / "models" / "iiwa7_random"
+MODEL = model_dir("iiwa7_random")
 DATASET = ROOT / "datasets" / "iiwa7" / "random"
 
 
@@ -123,7 +124,7 @@ def test_bad_inputs_are_one_line_errors(follower, test_knots, tmp_path):
     with pytest.raises(FollowerError, match="not a pathrl run"):
         Follower.load(tmp_path)
     with pytest.raises(FollowerError, match="controller"):
-        Follower.load(ROOT / "models" / "iiwa7_ball_tray_controller")
+        Follower.load(model_dir("iiwa7_ball_tray_controller"))
 
 
 def test_export_round_trip_matches_pytorch(tmp_path):
@@ -145,7 +146,7 @@ def test_export_round_trip_matches_pytorch(tmp_path):
         jit = torch.jit.load(str(out / "actor.pt"))(obs)
     onnx = onnxruntime.InferenceSession(str(out / "actor.onnx")).run(None, {"obs": obs.numpy()})[0]
     assert jit.shape == (3, 7) and np.allclose(jit.numpy(), onnx, atol=1e-5)
-    assert main([f"run_dir={ROOT / 'models' / 'iiwa7_ball_tray_controller'}", f"out={tmp_path / 'x'}"]) == 2
+    assert main([f"run_dir={model_dir('iiwa7_ball_tray_controller')}", f"out={tmp_path / 'x'}"]) == 2
     assert main([f"run_dir={MODEL}", "observations=0"]) == 2
     assert main(["model=foo"]) == 2
 
@@ -158,7 +159,7 @@ def test_a_distilled_student_with_float32_mixed_precision_layers_exports(tmp_pat
     from pathrl.cli.export import main
 
     out = tmp_path / "export"
-    assert main([f"run_dir={ROOT / 'models' / 'iiwa7_random_track_distill'}", f"out={out}", f"dataset.path={DATASET}",
+    assert main([f"run_dir={model_dir('iiwa7_random_track_distill')}", f"out={out}", f"dataset.path={DATASET}",
                  "observations=200"]) == 0
     report = json.loads((out / "export.json").read_text())
     assert report["hidden_dtype"] == "float32" and report["max_abs_diff_trained_dtype"] == 0.0

@@ -32,6 +32,7 @@ from pathrl.envs.device import (
 )
 from pathrl.envs.registry import EVAL_ENV, EnvRequest, make_env
 from pathrl.envs.state import restore, snapshot
+from pathrl.models import model_dir, model_ref
 from pathrl.policy.residual import ControllerObs
 from pathrl.train import device_check as dc
 from pathrl.train import placement
@@ -39,7 +40,7 @@ from pathrl.train import placement
 ROOT = Path(__file__).resolve().parents[1]
 #: The smallest shipped model with weights (296 kB): a distilled student on the analytic ball, taught by the tray
 #: controller, so its runs have a feedback part and a controller with state.
-MODEL = ROOT / "models" / "iiwa7_ball_balancing_distill"
+MODEL = model_dir("iiwa7_ball_balancing_distill")
 DEVICES = dc.available_devices()
 CUDA = pytest.mark.skipif(not torch.cuda.is_available(), reason="no CUDA device")
 BALL = {"name": "ball_on_plate", "feedback": "ball_on_plate", "backend": "pybullet"}
@@ -87,7 +88,7 @@ def test_a_trueadapt_env_in_pybullet_is_refused_off_the_cpu_before_its_data_is_r
     from pathrl.repro import trueadapt as adapt
     from pathrl.runs import load_run
 
-    cfg = load_run(ROOT / "models" / adapt.REALTIME_MODEL)[0]
+    cfg = load_run(model_dir(adapt.REALTIME_MODEL))[0]
     cfg["task"] = {**cfg["task"], "backend": "pybullet"}
     with pytest.raises(DeviceError, match="simulates in PyBullet, on the CPU only"):
         build_trueadapt_env(cfg, "test", 2, str(tmp_path / "no_dataset"), 0, device="cuda")
@@ -342,7 +343,7 @@ def test_the_follower_of_a_gpu_trained_run_builds_on_the_cpu(tmp_path):
 
     from pathrl.deploy import Follower
 
-    follower = Follower.load(_gpu_trained(ROOT / "models" / "iiwa7_random", tmp_path / "m"))
+    follower = Follower.load(_gpu_trained(model_dir("iiwa7_random"), tmp_path / "m"))
     knots = 0.3 * np.sin(np.linspace(0.0, 3.0, 20)[:, None] + np.arange(follower.robot.path_dof))
     follower.reset(knots)
     assert follower.env.device.type == "cpu" and follower.decide().position.shape[1] == follower.robot.dof
@@ -352,13 +353,13 @@ def test_a_gpu_trained_trueadapt_policy_is_timed_on_the_cpu(tiny_trueadapt, tmp_
     from pathrl.eval import trueadapt_realtime as rt
     from pathrl.repro import trueadapt as adapt
 
-    model = _gpu_trained(ROOT / "models" / adapt.REALTIME_MODEL, tmp_path / "m")
+    model = _gpu_trained(model_dir(adapt.REALTIME_MODEL), tmp_path / "m")
     r = rt.measure(model, str(tiny_trueadapt.path), decisions=3)  # builds the whole env: on the evaluation device
     assert r["decisions"] == 3
 
 
 # ------------------------------------------------------------------------------------------- tools/gpu_check.py
-BARE = ("pathrl", "conf", "pyproject.toml", "tools/gpu_check.py", f"models/{MODEL.name}")
+BARE = ("pathrl", "conf", "pyproject.toml", "tools/gpu_check.py", model_ref(MODEL.name))
 
 
 def test_gpu_check_dry_run_from_a_bare_copy(tmp_path):
@@ -377,7 +378,7 @@ def test_gpu_check_dry_run_from_a_bare_copy(tmp_path):
     size = sum(p.stat().st_size for p in copy.rglob("*") if p.is_file())
     assert size < 6e6, size
     env = {**os.environ, "OMP_NUM_THREADS": "1", "PYTHONPATH": str(copy)}
-    cmd = [sys.executable, "tools/gpu_check.py", "--dry-run", "--install", "--model", f"models/{MODEL.name}"]
+    cmd = [sys.executable, "tools/gpu_check.py", "--dry-run", "--install", "--model", model_ref(MODEL.name)]
     r = subprocess.run(cmd, cwd=copy, env=env, capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]
     assert "would run:" in r.stdout and "--index-url https://download.pytorch.org/whl/cu126" in r.stdout
@@ -434,7 +435,7 @@ def test_gpu_check_refuses_bad_arguments_and_a_machine_without_cuda(tmp_path, ca
         assert "sees no CUDA device" in capsys.readouterr().err and not (tmp_path / "g.json").exists()
     from pathrl.repro import trueadapt as adapt
 
-    assert gpu_check.main(["--model", str(ROOT / "models" / adapt.REALTIME_MODEL), "--dry-run"]) == 2
+    assert gpu_check.main(["--model", str(model_dir(adapt.REALTIME_MODEL)), "--dry-run"]) == 2
     assert "the device checks take a policy of task tracking or ball_on_plate" in capsys.readouterr().err
     cmds = gpu_check.install_commands("cu128")
     assert cmds[0][-3:] == ["torch==2.13.0", "--index-url", "https://download.pytorch.org/whl/cu128"]

@@ -27,6 +27,8 @@ from pathlib import Path
 
 import pytest
 
+from pathrl.models import model_dir, model_ref
+
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "results"
 
@@ -92,13 +94,13 @@ def rcp(receipt: str, key: str) -> Source:
 
 
 def summary(model: str, key: str, scale: float = 1.0) -> Source:
-    """A key of models/<model>/summary.json (training records), times `scale` (1/60: seconds to minutes)."""
-    return lambda: float(_dig(_json(f"models/{model}/summary.json"), key)) * scale
+    """A key of models/<family>/<model>/summary.json (training records), times `scale` (1/60: seconds to minutes)."""
+    return lambda: float(_dig(_json(f"{model_ref(model)}/summary.json"), key)) * scale
 
 
 def minutes(*models: str) -> Source:
     """Training wall time of the models together, in minutes."""
-    return lambda: sum(float(_json(f"models/{m}/summary.json")["wall_time_s"]) for m in models) / 60
+    return lambda: sum(float(_json(f"{model_ref(m)}/summary.json")["wall_time_s"]) for m in models) / 60
 
 
 def file(path: str, key: str, scale: float = 1.0) -> Source:
@@ -121,10 +123,10 @@ def hi(*sources: Source) -> Source:
 
 
 def cfg(model: str, key: str, scale: float = 1.0) -> Source:
-    """A setting of models/<model>/config.yaml (dotted path), times `scale` (100: m to cm)."""
+    """A setting of models/<family>/<model>/config.yaml (dotted path), times `scale` (100: m to cm)."""
     import yaml
 
-    return lambda: float(_dig(yaml.safe_load((ROOT / "models" / model / "config.yaml").read_text()), key)) * scale
+    return lambda: float(_dig(yaml.safe_load((model_dir(model) / "config.yaml").read_text()), key)) * scale
 
 
 def derived(fn: Callable[[], float], why: str) -> Source:
@@ -185,13 +187,14 @@ RECEIPTS: list[Receipt] = [
     R(README, "| **3.32** | 0.062 | **1.79** / 4.50 | 0 |", t("I", "iiwa7/random", "duration_s"),
       t("I", "iiwa7/random", "joint_dev_mean_rad"), t("I", "iiwa7/random", "cart_pos_dev_mean_cm"),
       t("I", "iiwa7/random", "cart_pos_dev_max_cm"), raw("iiwa7_random_track_distill", "limit_violations")),
-    R(README, "(`models/iiwa7_random`) | 3.91 | 0.100 | 2.92 / 6.96 | 0 |",
+    R(README, "(`models/tracking/iiwa7_random`) | 3.91 | 0.100 | 2.92 / 6.96 | 0 |",
       *[raw("iiwa7_random", k) for k in ("duration_s", "joint_dev_mean_rad", "cart_pos_dev_mean_cm",
                                          "cart_pos_dev_max_cm", "limit_violations")]),
-    R(README, "path length weight 6, then 9 (`models/iiwa7_random_fast`) | 3.63 | 0.116 | 3.31 / 7.92 | 0 |",
-      cfg("iiwa7_random_continue", "reward.terms.path_length.weight"),
-      cfg("iiwa7_random_fast", "reward.terms.path_length.weight"),
-      *[rcp("iiwa7_random_fast", k) for k in ("duration_s", "joint_dev_mean_rad", "cart_pos_dev_mean_cm",
+    R(README, "path length weight 6, then 9 (`models/tracking/iiwa7_random_length9`) | 3.63 | 0.116 | 3.31 / 7.92 | "
+              "0 |",
+      cfg("iiwa7_random_length6", "reward.terms.path_length.weight"),
+      cfg("iiwa7_random_length9", "reward.terms.path_length.weight"),
+      *[rcp("iiwa7_random_length9", k) for k in ("duration_s", "joint_dev_mean_rad", "cart_pos_dev_mean_cm",
                                               "cart_pos_dev_max_cm", "limit_violations")]),
     R(README, "| 4.81 | 0.086 | 2.52 / 6.06 | 0 |",
       *[raw("iiwa7_random_length_eq_deviation", k) for k in ("duration_s", "joint_dev_mean_rad",
@@ -203,7 +206,7 @@ RECEIPTS: list[Receipt] = [
     R(README, "the student is 1.12x TOPP-RA",
       ratio(t("I", "iiwa7/random", "duration_s"), t("VI", "iiwa7/random", "toppra_duration_s"))),
     R(README, "the best PPO policy 1.22x",
-      ratio(rcp("iiwa7_random_fast", "duration_s"), t("VI", "iiwa7/random", "toppra_duration_s"))),
+      ratio(rcp("iiwa7_random_length9", "duration_s"), t("VI", "iiwa7/random", "toppra_duration_s"))),
     R(README, "1.99 s at 0.75 cm, by PPO 2.15 s at\n2.93 cm, paper 2.44 s at 1.4 cm",
       t("I", "iiwa7/ball_balancing", "duration_s"), t("I", "iiwa7/ball_balancing", "cart_pos_dev_mean_cm"),
       rcp("iiwa7_ball_balancing_length_lt", "duration_s"), rcp("iiwa7_ball_balancing_length_lt",
@@ -263,9 +266,9 @@ RECEIPTS: list[Receipt] = [
 # docs/results.md
 I_ROWS = ("iiwa7/random", "iiwa7/target_point", "iiwa7/ball_balancing", "armar6/random", "armar4_fixed/random",
           "armar4_fixed/target_point")
-PPO_BEST = {"iiwa7/random": "iiwa7_random_fast", "iiwa7/target_point": "iiwa7_target_point",
-            "iiwa7/ball_balancing": "iiwa7_ball_balancing_length_lt", "armar6/random": "armar6_random_continue",
-            "armar4_fixed/random": "armar4_random_bias", "armar4_fixed/target_point": "armar4_target_point_faster"}
+PPO_BEST = {"iiwa7/random": "iiwa7_random_length9", "iiwa7/target_point": "iiwa7_target_point",
+            "iiwa7/ball_balancing": "iiwa7_ball_balancing_length_lt", "armar6/random": "armar6_random_length05",
+            "armar4_fixed/random": "armar4_random_bias", "armar4_fixed/target_point": "armar4_target_point_length8"}
 
 
 def vs_toppra(row: str) -> Source:
@@ -353,17 +356,20 @@ RECEIPTS += [
       const(200, "where the quoted range starts"),
       ttq_after("duration_s", min), ttq_after("duration_s", max),
       ttq_after("cart_pos_dev_mean_cm", min), ttq_after("cart_pos_dev_mean_cm", max)),
-    R(RES, "the best was 1.22 at 3.3 cm (`models/iiwa7_random_fast`, 3.63 s)", ppo_vs_toppra("iiwa7/random"),
-      rcp("iiwa7_random_fast", "cart_pos_dev_mean_cm"), rcp("iiwa7_random_fast", "duration_s")),
-    R(RES, "(1.32 at 2.9 cm) trained on at path-length weight 6 (`models/iiwa7_random_continue`, 300 iterations, 8 "
+    R(RES, "the best was 1.22 at 3.3 cm (`models/tracking/iiwa7_random_length9`, 3.63 s)",
+      ppo_vs_toppra("iiwa7/random"),
+      rcp("iiwa7_random_length9", "cart_pos_dev_mean_cm"), rcp("iiwa7_random_length9", "duration_s")),
+    R(RES, "(1.32 at 2.9 cm) trained on at path-length weight 6 (`models/tracking/iiwa7_random_length6`, 300 "
+           "iterations, 8 "
       "min: "
            "1.28 at\n3.0 cm), then at weight 9 with the action noise annealed to 0.01 (200 iterations: 1.22)",
       ratio(raw("iiwa7_random", "duration_s"), t("VI", "iiwa7/random", "toppra_duration_s")),
-      raw("iiwa7_random", "cart_pos_dev_mean_cm"), cfg("iiwa7_random_continue", "reward.terms.path_length.weight"),
-      summary("iiwa7_random_continue", "iterations"), minutes("iiwa7_random_continue"),
-      ratio(rcp("iiwa7_random_continue", "duration_s"), t("VI", "iiwa7/random", "toppra_duration_s")),
-      rcp("iiwa7_random_continue", "cart_pos_dev_mean_cm"), cfg("iiwa7_random_fast", "reward.terms.path_length.weight"),
-      cfg("iiwa7_random_fast", "std_anneal.final"), summary("iiwa7_random_fast", "iterations"),
+      raw("iiwa7_random", "cart_pos_dev_mean_cm"), cfg("iiwa7_random_length6", "reward.terms.path_length.weight"),
+      summary("iiwa7_random_length6", "iterations"), minutes("iiwa7_random_length6"),
+      ratio(rcp("iiwa7_random_length6", "duration_s"), t("VI", "iiwa7/random", "toppra_duration_s")),
+      rcp("iiwa7_random_length6", "cart_pos_dev_mean_cm"),
+      cfg("iiwa7_random_length9", "reward.terms.path_length.weight"),
+      cfg("iiwa7_random_length9", "std_anneal.final"), summary("iiwa7_random_length9", "iterations"),
       ppo_vs_toppra("iiwa7/random")),
     R(RES, "The default reward weights path length 4.0 against deviation 0.9 + 0.9",
       cfg("iiwa7_random", "reward.terms.path_length.weight"), cfg("iiwa7_random", "reward.terms.deviation_max.weight"),
@@ -397,7 +403,8 @@ RECEIPTS += [
       *row_I2("iiwa7/target_point")),
     R(RES, "(500\niterations of 1024 envs, 8.2 M steps, 9.4 min on one thread)",
       *budget("iiwa7_target_point_track_distill")),
-    R(RES, "(`models/iiwa7_target_point`, 1200 iterations, 19 s budget, path length weighted 6\ninstead of 4) reaches "
+    R(RES, "(`models/tracking/iiwa7_target_point`, 1200 iterations, 19 s budget, path length weighted 6\ninstead of "
+           "4) reaches "
            "4.84 s at 3.1 cm, 1.38x TOPP-RA (paper 4.99 s at 3.7 cm; the paper's policy is 1.43x our\nTOPP-RA)",
       summary("iiwa7_target_point", "iterations"), cfg("iiwa7_target_point", "env.episode_budget_s"),
       cfg("iiwa7_target_point", "reward.terms.path_length.weight"), cfg("iiwa7_random",
@@ -423,7 +430,7 @@ RECEIPTS += [
       file("results/time_to_quality/iiwa7_ball_balancing/curve.json", "runs.0.minutes_to_target")),
     R(RES, "(400 iterations from scratch, path length weighted 1) at 2.15 s and 2.93 cm, the policy at weight 4 the "
       "ball runs start\n"
-           "from (`models/iiwa7_ball_balancing`) at 2.02 s and 3.85 cm",
+           "from (`models/tracking/iiwa7_ball_balancing`) at 2.02 s and 3.85 cm",
       summary("iiwa7_ball_balancing_length_lt", "iterations"),
       cfg("iiwa7_ball_balancing_length_lt", "reward.terms.path_length.weight"),
       rcp("iiwa7_ball_balancing_length_lt", "duration_s"), rcp("iiwa7_ball_balancing_length_lt",
@@ -439,9 +446,9 @@ RECEIPTS += [
     R(RES, "500 iterations at\npath-length weight 2, then 300 more at 0.5, 55 min in all): 4.54 s at 6.0 cm, 1.57x "
       "TOPP-RA.",
       summary("armar6_random", "iterations"), cfg("armar6_random", "reward.terms.path_length.weight"),
-      summary("armar6_random_continue", "iterations"), cfg("armar6_random_continue", "reward.terms.path_length.weight"),
-      minutes("armar6_random", "armar6_random_continue"), rcp("armar6_random_continue", "duration_s"),
-      rcp("armar6_random_continue", "cart_pos_dev_mean_cm"), ppo_vs_toppra("armar6/random")),
+      summary("armar6_random_length05", "iterations"), cfg("armar6_random_length05", "reward.terms.path_length.weight"),
+      minutes("armar6_random", "armar6_random_length05"), rcp("armar6_random_length05", "duration_s"),
+      rcp("armar6_random_length05", "cart_pos_dev_mean_cm"), ppo_vs_toppra("armar6/random")),
     R(RES, "ARMAR-4 random, the Table I row: **3.27 s at 1.77 cm**, 1.15x TOPP-RA, 0 violations\n(paper 5.09 s at 3.3 "
       "cm; "
            "second test split 3.25 s at 1.76 cm)", *row_I("armar4_fixed/random", "armar4_random_track_distill"),
@@ -456,14 +463,16 @@ RECEIPTS += [
     R(RES, "the authors' length weight ratio; 4.52 s at 5.6 cm) with its 18 output offsets\nsearched on the training "
            "return (`bias_search`, `pathrl/train/bias_search.py`; 10 min on one thread)",
       raw("armar4_random", "duration_s"), raw("armar4_random", "cart_pos_dev_mean_cm"),
-      derived(lambda: len(_json("models/armar4_random_bias/summary.json")["bias_search"]["offsets"]), "searched "
-      "offsets"),
+      derived(lambda: len(_json(f"{model_ref('armar4_random_bias')}/summary.json")["bias_search"]["offsets"]),
+              "searched offsets"),
       minutes("armar4_random_bias")),
-    R(RES, "iiwa7: **3.87 s at 2.88\ncm** (paper 4.87 s at 3.9 cm; `models/iiwa7_random_broad_track_distill`, 600 "
+    R(RES, "iiwa7: **3.87 s at 2.88\ncm** (paper 4.87 s at 3.9 cm; "
+           "`models/tracking/iiwa7_random_broad_track_distill`, 600 "
       "iterations, 7.0 min)", t("IV", "iiwa7", "duration_s"), t("IV", "iiwa7", "cart_pos_dev_mean_cm"),
       p("IV", "iiwa7", "duration_s"), p("IV", "iiwa7", "cart_pos_dev_mean_cm"),
       summary("iiwa7_random_broad_track_distill", "iterations"), minutes("iiwa7_random_broad_track_distill")),
-    R(RES, "ARMAR-4: **4.11 s\nat 2.27 cm** (paper 5.40 s at 3.8 cm; `models/armar4_random_broad_track_distill`, 500 "
+    R(RES, "ARMAR-4: **4.11 s\nat 2.27 cm** (paper 5.40 s at 3.8 cm; "
+           "`models/tracking/armar4_random_broad_track_distill`, 500 "
       "iterations, 8.3 min). Both\nwith 0 violations.", t("IV", "armar4_fixed", "duration_s"),
       t("IV", "armar4_fixed", "cart_pos_dev_mean_cm"), p("IV", "armar4_fixed", "duration_s"),
       p("IV", "armar4_fixed", "cart_pos_dev_mean_cm"), summary("armar4_random_broad_track_distill", "iterations"),
@@ -482,7 +491,7 @@ RECEIPTS += [
       rcp("armar4_random_broad_track_distill", "duration_s"),
       rcp("armar4_random_broad_track_distill", "cart_pos_dev_mean_cm"), t("I", "armar4_fixed/random", "duration_s"),
       t("I", "armar4_fixed/random", "cart_pos_dev_mean_cm")),
-    R(RES, "`models/armar4_random` gives 4.08 s at 6.7 cm", t("IV", "armar4_fixed/ppo_random", "duration_s"),
+    R(RES, "`models/tracking/armar4_random` gives 4.08 s at 6.7 cm", t("IV", "armar4_fixed/ppo_random", "duration_s"),
       t("IV", "armar4_fixed/ppo_random", "cart_pos_dev_mean_cm")),
     R(RES, "ARMAR-4 target points, the Table I row: **3.88 s at 1.63 cm**, 1.11x TOPP-RA, 0 violations (paper 5.48 s "
       "at "
@@ -490,19 +499,20 @@ RECEIPTS += [
       *row_I("armar4_fixed/target_point", "armar4_target_point_track_distill"), *row_I2("armar4_fixed/target_point")),
     R(RES, "500 iterations of 1024 envs, 8.2 M steps, 14 min on one thread",
       *budget("armar4_target_point_track_distill")),
-    R(RES, "(`models/armar4_target_point`, 800 iterations, the authors' 20 s ARMAR budget): 6.02 s at\n4.1 cm, 1.72x "
+    R(RES, "(`models/tracking/armar4_target_point`, 800 iterations, the authors' 20 s ARMAR budget): 6.02 s at\n4.1 "
+           "cm, 1.72x "
            "TOPP-RA (paper 5.48 s at 3.6 cm). Six continuation steps",
       summary("armar4_target_point", "iterations"), cfg("armar4_target_point", "env.episode_budget_s"),
       rcp("armar4_target_point", "duration_s"), rcp("armar4_target_point", "cart_pos_dev_mean_cm"),
       ratio(rcp("armar4_target_point", "duration_s"), t("VI", "armar4_fixed/target_point", "toppra_duration_s")),
       p("I", "armar4_fixed/target_point", "duration_s"), p("I", "armar4_fixed/target_point", "cart_pos_dev_mean_cm")),
     R(RES, "re-exploring at path-length weight 6", cfg("armar4_target_point_fast", "reward.terms.path_length.weight")),
-    R(RES, "`_fast_continue2`, `_fast_continue3`: 5.54 s at 3.67 cm, then the path length weighted 8 for\n"
-           "`models/armar4_target_point_faster`): 5.48 s at 3.75 cm, 1.57x TOPP-RA",
-      raw("armar4_target_point_fast_continue3", "duration_s"), raw("armar4_target_point_fast_continue3",
+    R(RES, "`_fast_continue2`, `armar4_target_point_length6`: 5.54 s at 3.67 cm, then the path length weighted 8 for\n"
+           "`models/tracking/armar4_target_point_length8`): 5.48 s at 3.75 cm, 1.57x TOPP-RA",
+      raw("armar4_target_point_length6", "duration_s"), raw("armar4_target_point_length6",
       "cart_pos_dev_mean_cm"),
-      cfg("armar4_target_point_faster", "reward.terms.path_length.weight"),
-      rcp("armar4_target_point_faster", "duration_s"), rcp("armar4_target_point_faster", "cart_pos_dev_mean_cm"),
+      cfg("armar4_target_point_length8", "reward.terms.path_length.weight"),
+      rcp("armar4_target_point_length8", "duration_s"), rcp("armar4_target_point_length8", "cart_pos_dev_mean_cm"),
       ppo_vs_toppra("armar4_fixed/target_point")),
     R(RES, "with fixed legs it falls in 10.5 % of 200\nepisodes (paper 26 %, Table VIII)",
       t("VIII", "fixed_legs/no_balancing_reward", "fell_pct"),
@@ -515,9 +525,9 @@ RECEIPTS += [
       minutes("armar4_target_point_balancing"), t("VIII", "fixed_legs/balancing_reward", "fell_pct"),
       p("VIII", "fixed_legs/balancing_reward", "fell_pct"),
       derived(lambda: len(_dig(__import__("yaml").safe_load(
-          (ROOT / "models/armar4_legs_target_point_balancing/config.yaml").read_text()), "robot.joints"))
+          (model_dir("armar4_legs_target_point_balancing") / "config.yaml").read_text()), "robot.joints"))
           - len(_dig(__import__("yaml").safe_load(
-              (ROOT / "models/armar4_legs_target_point_balancing/config.yaml").read_text()), "robot.path_joints")),
+              (model_dir("armar4_legs_target_point_balancing") / "config.yaml").read_text()), "robot.path_joints")),
           "joints that are not path joints: the legs"),
       summary("armar4_legs_target_point_balancing", "iterations"), minutes("armar4_legs_target_point_balancing"),
       t("VIII", "controlled_legs/balancing_reward", "fell_pct"), p("VIII", "controlled_legs/balancing_reward",
@@ -668,7 +678,7 @@ RECEIPTS += [
         for s in (t("I", r, "duration_s"), t("I", r, "cart_pos_dev_mean_cm"), t("VI", r, "greedy_duration_s"),
                   raw(GREEDY_RAW[r], "cart_pos_dev_mean_cm"))]),
     R(RES, "(ARMAR-6: 4.54 s at 6.0 cm, ARMAR-4 random: 4.66 s at 2.7 cm by PPO)",
-      rcp("armar6_random_continue", "duration_s"), rcp("armar6_random_continue", "cart_pos_dev_mean_cm"),
+      rcp("armar6_random_length05", "duration_s"), rcp("armar6_random_length05", "cart_pos_dev_mean_cm"),
       rcp("armar4_random_bias", "duration_s"), rcp("armar4_random_bias", "cart_pos_dev_mean_cm")),
     # path changes
     R(RES, "1-4 s into a test path", raw("path_change_iiwa7_random.json", "switch_range_s.0"),

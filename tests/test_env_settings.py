@@ -17,7 +17,7 @@ from pathrl.schema import TrainAppCfg
 
 ROOT = Path(__file__).resolve().parents[1]
 ENV_YAMLS = sorted((ROOT / "pathrl" / "conf" / "env").glob("*.yaml"))
-SAVED = sorted((ROOT / "models").glob("*/config.yaml"))
+SAVED = sorted((ROOT / "models").glob("*/*/config.yaml"))
 DEFAULTS = {f.name: f.default for f in dataclasses.fields(EnvSettings)}
 
 

@@ -87,7 +87,7 @@ def test_an_episode_offset_in_one_joint_shows_in_the_matched_samples():
 
 def test_pathrl_eval_writes_per_joint_and_prints_the_offset_line(tmp_path, capsys):
     out = tmp_path / "out"
-    assert eval_cli.main(["run_dir=models/iiwa7_random", "episodes=2", "record=false", f"out={out}"]) == 0
+    assert eval_cli.main(["run_dir=models/tracking/iiwa7_random", "episodes=2", "record=false", f"out={out}"]) == 0
     m = json.loads((out / "metrics.json").read_text())
     joints = load_robot_by_name("iiwa7").path_joints
     assert list(m["per_joint"]) == list(joints)

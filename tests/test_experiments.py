@@ -11,6 +11,7 @@ from hydra import compose, initialize_config_dir
 
 from pathrl.cli.common import CONF_DIR
 from pathrl.cli.store import register
+from pathrl.models import model_ref
 from pathrl.repro.tables import SWEEPS as TABLES
 
 EXPERIMENTS = sorted(p.stem for p in (CONF_DIR / "experiment").glob("*.yaml"))
@@ -111,5 +112,5 @@ def test_warm_starts_match_the_experiments():
 
     assert len(WARM_STARTS) >= 14
     for name in EXPERIMENTS:  # both ways: every warm start, and no init_from on the others
-        expected = f"models/{WARM_STARTS[name]}" if name in WARM_STARTS else None
+        expected = model_ref(WARM_STARTS[name]) if name in WARM_STARTS else None
         assert _compose([f"+experiment={name}"]).init_from == expected, name

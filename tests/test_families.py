@@ -18,10 +18,10 @@ ROOT = Path(__file__).resolve().parents[1]
 
 #: Per family: the smallest shipped run and the pathrl-eval keys of a tiny evaluation.
 CASES = {
-    "tracking": ("models/iiwa7_random", ["episodes=2", "num_envs=2", "record=false"]),
-    "trueadapt": ("models/iiwa7_trueadapt_on_plate_tray_controller", ["episodes=2", "num_envs=2",
+    "tracking": ("models/tracking/iiwa7_random", ["episodes=2", "num_envs=2", "record=false"]),
+    "trueadapt": ("models/trueadapt/iiwa7_trueadapt_on_plate_tray_controller", ["episodes=2", "num_envs=2",
                                                                       "backend=analytic"]),
-    "industrial": ("models/industrial_td3", ["episodes=1"]),
+    "industrial": ("models/industrial/industrial_td3", ["episodes=1"]),
 }
 STEPS = [f.name for f in fields(Family) if f.name not in ("name", "summary", "tasks", "recordings")]
 

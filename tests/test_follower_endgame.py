@@ -16,12 +16,13 @@ from pathrl.deploy import Follower, FollowerError
 from pathrl.deploy.follower import SETTLE_TOLERANCE
 from pathrl.limits.check import limit_violations
 from pathrl.limits.feasible import JointLimits
+from pathrl.models import model_dir
 from pathrl.paths.knots import KnotStrategy
 from pathrl.paths.pathset import build_pathset
 from pathrl.paths.quick import quick_knots, quick_pathset
 
 ROOT = Path(__file__).resolve().parents[1]
-MODEL = ROOT / "models" / "iiwa7_random"
+MODEL = model_dir("iiwa7_random")
 
 
 @pytest.fixture(scope="module")
@@ -114,7 +115,7 @@ def test_a_prepared_path_replaces_like_its_knots(follower, test_knots):
         gap = follower.replace_path(prepared)
     assert gap < 1e-9
     assert torch.equal(follower.env.paths.table, follower.prepare(new).paths.table)
-    other = Follower.load(ROOT / "models" / "armar6_random")
+    other = Follower.load(model_dir("armar6_random"))
     with pytest.raises(FollowerError, match="another robot"):
         other.reset(prepared)
 

@@ -20,6 +20,7 @@ from pathrl.envs.tracking_cfg import TrackingEnvCfg
 from pathrl.limits.check import limit_violations
 from pathrl.limits.feasible import JointLimits
 from pathrl.limits.integrate import interpolate_step
+from pathrl.models import model_dir
 from pathrl.paths.inside import PathOutsideError, clip_spline_into, keep_inside, spline_excess, table_excess
 from pathrl.paths.knots import KnotStrategy
 from pathrl.paths.pathset import build_pathset
@@ -27,7 +28,7 @@ from pathrl.paths.quick import quick_knots
 from pathrl.paths.segments import full_segments, sample_segments
 
 ROOT = Path(__file__).resolve().parents[1]
-MODEL = ROOT / "models" / "iiwa7_random"
+MODEL = model_dir("iiwa7_random")
 
 
 @pytest.fixture(scope="module")
@@ -142,7 +143,7 @@ def test_a_path_starting_outside_the_range_is_clipped_and_followed_inside_every_
 
 
 def _model_copy(dest: Path, summary: str | None) -> Path:
-    """models/iiwa7_random at `dest`, its summary.json replaced by the text `summary` (None: removed)."""
+    """models/tracking/iiwa7_random at `dest`, its summary.json replaced by the text `summary` (None: removed)."""
     dest.mkdir()
     for name in ("config.yaml", "model.pt"):
         (dest / name).write_bytes((MODEL / name).read_bytes())

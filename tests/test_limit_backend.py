@@ -140,7 +140,7 @@ def test_run_config_chooses_the_backend_and_old_runs_keep_theirs():
     cfg = to_container(compose("train", ["native_limits=false", "compile_limits=false"], TrainAppCfg))
     assert LimitBackend.from_run(cfg) == LimitBackend(native=False, compiled=False)
     assert ADDED_KEYS["native_limits"] is True and "native_limits" in RESUME_MAY_CHANGE
-    for path in sorted((ROOT / "models").glob("*/config.yaml")):
+    for path in sorted((ROOT / "models").glob("*/*/config.yaml")):
         saved = yaml.safe_load(path.read_text())
         if "controller" in saved or "compile_limits" not in saved:
             continue

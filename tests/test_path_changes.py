@@ -114,11 +114,11 @@ def test_batched_tables_equal_build_pathset():
 
 def test_off_is_the_env_itself_and_configs_compose(setup, cfg):
     robot, paths = setup
-    plain = _cfg(["+experiment=iiwa7_random_continue"])
+    plain = _cfg(["+experiment=iiwa7_random_length6"])
     assert plain["path_change"] is None  # the default: no key value, saved configs unchanged
-    group = _cfg(["+experiment=iiwa7_random_continue", "path_change=train"])["path_change"]
+    group = _cfg(["+experiment=iiwa7_random_length6", "path_change=train"])["path_change"]
     assert {**group, "offsets": [0.3], "ramps": [1.0]} == cfg["path_change"]  # the experiment keeps gentle changes
-    assert cfg["path_change"]["enabled"] and cfg["init_from"] == "models/iiwa7_random_continue"
+    assert cfg["path_change"]["enabled"] and cfg["init_from"] == "models/tracking/iiwa7_random_length6"
     assert cfg["iterations"] == 200
     env = make_env(plain, EnvRequest(num_envs=2, seed=0, paths=paths, robot=robot))
     assert with_path_changes(plain, env) is env

@@ -13,13 +13,14 @@ from pathrl.cli.common import CONF_DIR, compose, to_container
 from pathrl.dataset.io import load_pathset
 from pathrl.envs.registry import EVAL_ENV, TASKS, EnvRequest, check_task, get_task, make_env, task_cfg
 from pathrl.envs.terminations import TerminationReason
+from pathrl.models import model_dir, model_ref
 from pathrl.paths.knots import KnotStrategy
 from pathrl.robot.model import load_robot
 from pathrl.schema import TrainAppCfg
 
 ROOT = Path(__file__).resolve().parents[1]
 EXPERIMENTS = sorted(p.stem for p in (CONF_DIR / "experiment").glob("*.yaml"))
-SAVED_RUNS = sorted(p.parent.name for p in (ROOT / "models").glob("*/config.yaml"))
+SAVED_RUNS = sorted(p.parent.name for p in (ROOT / "models").glob("*/*/config.yaml"))
 STEPS = 3
 
 
@@ -73,9 +74,9 @@ def test_unknown_or_inconsistent_task_is_a_one_line_error():
 
 @pytest.mark.parametrize("run", SAVED_RUNS)
 def test_saved_runs_name_registered_tasks(run):
-    cfg = yaml.safe_load((ROOT / "models" / run / "config.yaml").read_text())
+    cfg = yaml.safe_load((model_dir(run) / "config.yaml").read_text())
     if "robot" not in cfg:  # not a path-tracking run (the industrial TD3 models)
-        pytest.skip(f"models/{run} is not a pathrl path-tracking run")
+        pytest.skip(f"{model_ref(run)} is not a pathrl path-tracking run")
     assert get_task(cfg).name in TASKS
 
 

@@ -14,6 +14,7 @@ import pytest
 import yaml
 
 from pathrl.config.paper import load as load_paper
+from pathrl.models import model_dir, model_path
 from pathrl.repro.figures import pareto_table_ii
 from pathrl.repro.render import render_latex, render_markdown
 from pathrl.repro.tables import (
@@ -91,7 +92,7 @@ def test_rows_match_paper_tables_and_experiments():
         else:
             assert (r.key in PAPER[PAPER_TABLE.get(r.table, r.table)]["rows"]) != ((r.table, r.key) in NOT_IN_PAPER)
         if r.evaluation.model in CONTROLLER_MODELS:
-            assert "controller" in yaml.safe_load((ROOT / "models" / r.evaluation.model / "config.yaml").read_text())
+            assert "controller" in yaml.safe_load((model_dir(r.evaluation.model) / "config.yaml").read_text())
         elif not r.evaluation.generalization and r.table not in OURS_ONLY:
             assert (ROOT / "conf" / "experiment" / f"{r.evaluation.model}.yaml").is_file(), r.evaluation.model
     assert {r.key for r in ROWS if r.table == TABLE_I} == set(PAPER[TABLE_I]["rows"])
@@ -175,7 +176,7 @@ def test_quick_profile_trains_evaluates_and_renders(tmp_path):
     # reward row starts from iiwa7_ball_balancing, which is trained and shipped first
     for model in ("iiwa7_random_track_distill", "iiwa7_random_length_eq_deviation", "iiwa7_ball_balancing",
                   "iiwa7_ball_balancing_reward"):
-        assert (out / "models" / model / "model.pt").is_file(), model
+        assert (model_path(model, out / "models") / "model.pt").is_file(), model
     assert (out / "raw" / "toppra_iiwa7_random_paper.json").is_file()
     assert (out / "tables.csv").is_file() and (out / "tables.tex").is_file()
     assert (out / "figures" / "pareto_table_II.png").is_file()
@@ -193,8 +194,8 @@ def test_training_record_names_the_method_from_the_shipped_config(tmp_path):
         (d / "summary.json").write_text(json.dumps({"iterations": 3}))
         (d / "config.yaml").write_text(yaml.safe_dump(cfg))
     assert training_record(ppo) == {"iterations": 3, "method": "PPO from scratch"}
-    assert training_method({"agent": {"algorithm": {"class_name": "PPO"}}, "init_from": "models/iiwa7_random/"}) \
-        == "PPO from iiwa7_random"
+    ppo_cfg = {"agent": {"algorithm": {"class_name": "PPO"}}, "init_from": "models/tracking/iiwa7_random/"}
+    assert training_method(ppo_cfg) == "PPO from iiwa7_random"
     assert training_method({"residual": {"scale": 0.25, "controller": {"name": "tray"}}}) \
         == "PPO residual over tray, from scratch"
     assert training_record(student)["method"] == "DAgger from law_tracker"

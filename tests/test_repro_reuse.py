@@ -18,8 +18,9 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def _model(root: Path, name: str, weights: bytes | None, policy: str | None = None) -> Path:
-    """A fake models/<name>: config.yaml (naming `policy` under controller) and model.pt (None: a controller)."""
-    d = root / "models" / name
+    """A fake models/<family>/<name>: config.yaml (naming `policy` under controller) and model.pt (None: a
+    controller)."""
+    d = root / "models" / "tracking" / name
     d.mkdir(parents=True, exist_ok=True)
     ctrl = "" if policy is None else f"controller:\n  name: balance\n  policy: {policy}\n"
     (d / "config.yaml").write_text(f"experiment: {name}\n{ctrl}")
@@ -30,10 +31,10 @@ def _model(root: Path, name: str, weights: bytes | None, policy: str | None = No
 
 @pytest.fixture
 def repo(tmp_path: Path) -> Path:
-    """A fake repository: a controller naming models/policy_a, policies a and b, a test split."""
+    """A fake repository: a controller naming models/tracking/policy_a, policies a and b, a test split."""
     _model(tmp_path, "policy_a", b"weights a")
     _model(tmp_path, "policy_b", b"weights b")
-    _model(tmp_path, "balance", None, policy="models/policy_a")
+    _model(tmp_path, "balance", None, policy="models/tracking/policy_a")
     data = tmp_path / "datasets" / "armar4" / "target_point"
     data.mkdir(parents=True)
     (data / "dataset.json").write_text('{"seed": 0}')
@@ -46,10 +47,12 @@ def _split(root: Path) -> Path:
 
 
 def test_fingerprint_follows_the_controller_policy(repo: Path):
-    fp = fingerprint(repo, repo / "models" / "balance", _split(repo))
+    fp = fingerprint(repo, repo / "models" / "tracking" / "balance", _split(repo))
     assert sorted(fp) == ["datasets/armar4/target_point/dataset.json", "datasets/armar4/target_point/test.npz",
-                          "models/balance/config.yaml", "models/policy_a/config.yaml", "models/policy_a/model.pt"]
-    assert fp == fingerprint(repo, Path("models/balance"), Path("datasets/armar4/target_point"))  # relative to root
+                          "models/tracking/balance/config.yaml", "models/tracking/policy_a/config.yaml",
+                          "models/tracking/policy_a/model.pt"]
+    relative = fingerprint(repo, Path("models/tracking/balance"), Path("datasets/armar4/target_point"))  # to root
+    assert fp == relative
     assert all(len(h) == 64 for h in fp.values())
 
 
@@ -57,23 +60,23 @@ def test_changed_policy_or_weights_means_re_evaluate(repo: Path):
     result = repo / "results" / "raw" / "balance" / "metrics.json"
     result.parent.mkdir(parents=True)
     result.write_text("{}")
-    inputs = fingerprint(repo, repo / "models" / "balance", _split(repo))
+    inputs = fingerprint(repo, repo / "models" / "tracking" / "balance", _split(repo))
     record(result, inputs)
     assert json.loads((result.parent / "inputs.json").read_text())["files"] == inputs
-    assert stale(result, fingerprint(repo, repo / "models" / "balance", _split(repo))) is None
+    assert stale(result, fingerprint(repo, repo / "models" / "tracking" / "balance", _split(repo))) is None
 
-    _model(repo, "balance", None, policy="models/policy_b")  # the controller now drives another policy
-    why = stale(result, fingerprint(repo, repo / "models" / "balance", _split(repo)))
-    assert why is not None and why.startswith("inputs changed") and "models/policy_b/model.pt" in why
+    _model(repo, "balance", None, policy="models/tracking/policy_b")  # the controller now drives another policy
+    why = stale(result, fingerprint(repo, repo / "models" / "tracking" / "balance", _split(repo)))
+    assert why is not None and why.startswith("inputs changed") and "models/tracking/policy_b/model.pt" in why
 
-    _model(repo, "balance", None, policy="models/policy_a")
-    (repo / "models" / "policy_a" / "model.pt").write_bytes(b"retrained a")  # new weights of the same policy
-    why = stale(result, fingerprint(repo, repo / "models" / "balance", _split(repo)))
-    assert why == "inputs changed (models/policy_a/model.pt)"
+    _model(repo, "balance", None, policy="models/tracking/policy_a")
+    (repo / "models" / "tracking" / "policy_a" / "model.pt").write_bytes(b"retrained a")  # new weights, same policy
+    why = stale(result, fingerprint(repo, repo / "models" / "tracking" / "balance", _split(repo)))
+    assert why == "inputs changed (models/tracking/policy_a/model.pt)"
 
 
 def test_missing_fingerprint_is_reusable_missing_result_is_not(repo: Path):
-    inputs = fingerprint(repo, repo / "models" / "policy_a", _split(repo))
+    inputs = fingerprint(repo, repo / "models" / "tracking" / "policy_a", _split(repo))
     result = repo / "results" / "raw" / "policy_a" / "metrics.json"
     assert stale(result, inputs) == "no result"
     result.parent.mkdir(parents=True)
@@ -100,8 +103,8 @@ def test_evaluate_reuses_until_the_policy_changes(repo: Path, monkeypatch, capsy
 
     monkeypatch.setattr(steps, "sh", fake_sh)
     monkeypatch.setattr(steps, "CONTROLLER_MODELS", frozenset({"balance"}))
-    (repo / "models" / "balance" / "config.yaml").write_text(
-        f"controller:\n  name: balance\n  policy: {repo / 'models' / 'policy_a'}\n")
+    (repo / "models" / "tracking" / "balance" / "config.yaml").write_text(
+        f"controller:\n  name: balance\n  policy: {repo / 'models' / 'tracking' / 'policy_a'}\n")
     lay = Layout(repo / "results", repo / "models", repo / "runs", repo / "datasets", repo / "data")
     e = Evaluation("balance", "armar4", "target_point")
     raw = repo / "results" / "raw" / e.id
@@ -118,8 +121,8 @@ def test_evaluate_reuses_until_the_policy_changes(repo: Path, monkeypatch, capsy
     assert len(runs) == 1 and (raw / "inputs.json").is_file()
     run()  # unchanged: kept
     assert len(runs) == 1
-    (repo / "models" / "balance" / "config.yaml").write_text(
-        f"controller:\n  name: balance\n  policy: {repo / 'models' / 'policy_b'}\n")
+    (repo / "models" / "tracking" / "balance" / "config.yaml").write_text(
+        f"controller:\n  name: balance\n  policy: {repo / 'models' / 'tracking' / 'policy_b'}\n")
     run()  # the controller names another policy: re-evaluated, and said so
     assert len(runs) == 2
     assert "inputs changed" in capsys.readouterr().out
@@ -145,14 +148,15 @@ def test_path_change_re_evaluates_new_weights(repo: Path, monkeypatch):
     run()
     run()
     assert len(runs) == 1 and (repo / "results" / "raw" / "path_change_armar4_target_point.inputs.json").is_file()
-    (repo / "models" / "policy_a" / "model.pt").write_bytes(b"retrained a")
+    (repo / "models" / "tracking" / "policy_a" / "model.pt").write_bytes(b"retrained a")
     run()
     assert len(runs) == 2
 
 
 def test_trueadapt_evaluation_records_its_inputs(tmp_path: Path, monkeypatch):
-    """A TrueAdapt evaluation (the reference: the controller directory models/iiwa7_trueadapt_on_plate_reference)
-    on the committed split runs pathrl-eval, no tool script: recorded, then kept."""
+    """A TrueAdapt evaluation (the reference: the controller directory
+    models/trueadapt/iiwa7_trueadapt_on_plate_reference) on the committed split runs pathrl-eval, no tool script:
+    recorded, then kept."""
     runs: list[list[str]] = []
 
     def fake_sh(cmd: list[str], log: Path) -> None:
@@ -172,7 +176,7 @@ def test_trueadapt_evaluation_records_its_inputs(tmp_path: Path, monkeypatch):
     assert len(runs) == 1 and Path(runs[0][0]).name == "pathrl-eval" and not any("tools/" in x for x in runs[0])
     assert sorted(files) == ["datasets/iiwa7/trueadapt_on_plate/dataset.json",
                              "datasets/iiwa7/trueadapt_on_plate/test.npz",
-                             "models/iiwa7_trueadapt_on_plate_reference/config.yaml"]
+                             "models/trueadapt/iiwa7_trueadapt_on_plate_reference/config.yaml"]
 
 
 def test_train_jobs_train_a_generalization_row_on_its_train_dataset(monkeypatch):

@@ -10,6 +10,7 @@ from pathlib import Path
 import pytest
 import torch
 
+from pathrl.models import model_dir, model_path, model_ref
 from pathrl.repro import trueadapt as adapt
 from pathrl.repro import trueadapt_findings as findings
 
@@ -72,13 +73,14 @@ def test_missing_train_split_renders_as_not_available(tmp_path):
     # the step is skipped (no failure) where data/ lacks the train split; the test rows still run
     train = next(e for e in adapt.evaluations() if e.split == "train")
     root = tmp_path / "checkout"
-    (root / "models" / train.model).mkdir(parents=True)
-    (root / "models" / train.model / "config.yaml").write_text("{}")
+    model_path(train.model, root / "models").mkdir(parents=True)
+    (model_path(train.model, root / "models") / "config.yaml").write_text("{}")
     assert adapt.unavailable(train, root / "models", root / "data") == adapt.TRAIN_MISSING
     assert adapt.eval_command(train, root, root / "results" / "raw", 1000) is None
     test = dataclasses.replace(train, split="test", open_loop=True)
     assert adapt.eval_command(test, root, root / "results" / "raw", 12) == [
-        "pathrl-eval", f"run_dir=models/{train.model}", "dataset.path=datasets/iiwa7/trueadapt_on_plate", "split=test",
+        "pathrl-eval", f"run_dir={model_ref(train.model)}", "dataset.path=datasets/iiwa7/trueadapt_on_plate",
+        "split=test",
         "episodes=12", "seed=0", "backend=pybullet", "workers=1", "num_envs=250",
         f"out=results/raw/{train.model}_in_pybullet_open_loop", "open_loop=true"]
     (root / "results" / "raw" / test.id).mkdir(parents=True)
@@ -91,7 +93,7 @@ def test_rows_cover_the_paper_and_name_shipped_models():
     assert {r.key for r in adapt.ROWS if r.in_paper} == set(paper["rows"])
     assert all(len(v) == len(paper["columns"]) for v in paper["rows"].values())
     for e in adapt.evaluations():  # the reference's directory too (the controller `reference`)
-        assert (ROOT / "models" / e.run / "config.yaml").is_file(), e.run
+        assert (model_dir(e.run) / "config.yaml").is_file(), e.run
     assert len({e.id for e in adapt.evaluations()}) == len(adapt.evaluations())
     assert adapt.VALIDATION_ID in adapt.names() and "iiwa7_trueadapt_in_place_reference" in adapt.names()
 
@@ -143,7 +145,7 @@ def test_plan_runs_the_trueadapt_steps_through_the_family_registry(tmp_path, mon
     assert len(runs) == 3 and not any("tools/" in arg for cmd in runs for arg in cmd)
     evaluation, validation, timing = runs
     assert Path(evaluation[0]).name == "pathrl-eval"
-    assert "run_dir=models/iiwa7_trueadapt_on_plate_reference" in evaluation
+    assert "run_dir=models/trueadapt/iiwa7_trueadapt_on_plate_reference" in evaluation
     for cmd, name in ((validation, "validate"), (timing, "timing")):
         assert cmd[1:6] == ["-m", adapt.FAMILY_STEP, "trueadapt", name, cmd[5]], cmd
         fn = family(cmd[3]).step(cmd[4])

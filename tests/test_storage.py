@@ -11,6 +11,7 @@ import pytest
 import torch
 from test_train import BIN, ROOT, run, scalars, train_cmd
 
+from pathrl.models import model_dir
 from pathrl.storage import (
     CheckpointError,
     atomic_write,
@@ -132,7 +133,7 @@ def test_evaluating_a_damaged_model_is_a_one_line_error(tmp_path):
     model = tmp_path / "model"
     model.mkdir()
     for name in ("config.yaml", "model.pt", "summary.json"):
-        (model / name).write_bytes((ROOT / "models" / "iiwa7_random" / name).read_bytes())
+        (model / name).write_bytes((model_dir("iiwa7_random") / name).read_bytes())
     _flip_tensor_bytes(model / "model.pt")
     r = run([str(BIN / "pathrl-eval"), f"run_dir={model}", "episodes=2", f"out={tmp_path / 'out'}",
              "dataset.path=datasets/iiwa7/random"])
@@ -142,7 +143,7 @@ def test_evaluating_a_damaged_model_is_a_one_line_error(tmp_path):
 
 
 def test_shipped_models_carry_a_digest():
-    for p in sorted((ROOT / "models").glob("*/model.pt")):
+    for p in sorted((ROOT / "models").glob("*/*/model.pt")):
         assert "sha256" in torch.load(p, weights_only=True, map_location="cpu"), p
         load_checkpoint(p)
 

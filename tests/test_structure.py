@@ -109,8 +109,9 @@ def test_only_the_cli_imports_hydra():
 LAYERS: list[tuple[str, ...]] = [
     ("pathrl",),  # the package root: its version only
     # leaves, no pathrl import: C kernels, files and checkpoints, MCAP, path geometry, network classes, where conf/ is
-    # and how saved run configs are brought up to date
-    ("pathrl.native", "pathrl.storage", "pathrl.logging", "pathrl.paths", "pathrl.policy", "pathrl.config"),
+    # and how saved run configs are brought up to date, where a shipped model is
+    ("pathrl.native", "pathrl.storage", "pathrl.logging", "pathrl.paths", "pathrl.policy", "pathrl.config",
+     "pathrl.models"),
     ("pathrl.limits",),  # joint limits: valid acceleration ranges, braking, integration (torch and native)
     ("pathrl.robot",),  # robot specs from conf/robot and PATHRL_ROBOT_PATH, kinematics, collision
     ("pathrl.sim",),  # physics of the feedback tasks behind their Feedback protocol: analytic ball, PyBullet scenes

@@ -107,12 +107,13 @@ def test_select_by_table_or_model():
 
 
 def test_warm_starts_follow_defaults(tmp_path):
-    files = {"base": "init_from: null\n", "src": "iterations: 3\n", "warm": "init_from: models/src\n",
+    files = {"base": "init_from: null\n", "src": "iterations: 3\n", "warm": "init_from: models/tracking/src\n",
              "child": "defaults:\n  - warm\n  - override /reward: x\n",  # inherits warm's init_from
-             "reset": "defaults:\n  - warm\ninit_from: null\n", "over": "defaults:\n  - warm\ninit_from: models/base\n"}
+             "reset": "defaults:\n  - warm\ninit_from: null\n", "over": "defaults:\n  - warm\ninit_from: "
+                                                                        "models/tracking/base\n"}
     for name, text in files.items():
         (tmp_path / f"{name}.yaml").write_text(text)
     assert warm_starts(tmp_path) == {"child": "src", "over": "base", "warm": "src"}
     (tmp_path / "bad.yaml").write_text("init_from: runs/src/seed0\n")
-    with pytest.raises(SweepsError, match="bad.yaml: init_from must be models/<model>"):
+    with pytest.raises(SweepsError, match="bad.yaml: init_from: expected models/<family>/<name>"):
         warm_starts(tmp_path)

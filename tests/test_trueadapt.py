@@ -30,6 +30,7 @@ from pathrl.envs.trueadapt_rewards import (
     on_plate,
 )
 from pathrl.limits.check import limit_violations
+from pathrl.models import model_dir
 from pathrl.robot.external import load_robot_by_name
 
 ROBOT = load_robot_by_name("iiwa7")
@@ -381,6 +382,6 @@ def test_each_from_scratch_recipe_trains(variant, tiny_trueadapt, tmp_path):
     assert cfg.get("init_from") is None
     assert train(cfg, Path(run_dir))["iterations"] == 2
     actor, critic = _input_dims(run_dir / "model_1.pt")
-    full_actor, full_critic = _input_dims(ROOT / "models" / SCRATCH / "model.pt")
+    full_actor, full_critic = _input_dims(model_dir(SCRATCH) / "model.pt")
     assert critic > actor  # the asymmetric critic
     assert (full_actor - actor, full_critic - critic) == (ABLATIONS[variant], ABLATIONS[variant])

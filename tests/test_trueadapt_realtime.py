@@ -8,10 +8,11 @@ from pathlib import Path
 import pytest
 
 from pathrl.eval import trueadapt_realtime as rt
+from pathrl.models import model_dir, model_ref
 from pathrl.repro import trueadapt as adapt
 
 ROOT = Path(__file__).resolve().parents[1]
-MODEL = ROOT / "models" / adapt.REALTIME_MODEL
+MODEL = model_dir(adapt.REALTIME_MODEL)
 DATA = ROOT / "datasets" / "iiwa7" / adapt.REALTIME_DATA
 
 
@@ -49,4 +50,4 @@ def test_the_tables_show_the_measurement_or_say_it_is_missing(tmp_path):
     (tmp_path / f"{adapt.REALTIME_ID}.json").write_text("{}")
     assert adapt.realtime_command(ROOT, tmp_path, ROOT / "models", ROOT / "datasets", 10, reuse=True) is None
     cmd = adapt.realtime_command(ROOT, tmp_path, ROOT / "models", ROOT / "datasets", 10)
-    assert cmd[:6] == ["python", "-m", adapt.FAMILY_STEP, "trueadapt", "timing", f"models/{adapt.REALTIME_MODEL}"]
+    assert cmd[:6] == ["python", "-m", adapt.FAMILY_STEP, "trueadapt", "timing", model_ref(adapt.REALTIME_MODEL)]

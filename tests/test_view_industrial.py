@@ -137,7 +137,7 @@ def rrd_entities(path: Path) -> dict[str, int]:
     (["traj=Type 9", "method=mpgd"], "unknown evaluation row 'Type 9'"),
     ([f"traj={ROW}", "method=rl"], "method=rl needs policy="),
     ([f"traj={ROW}", "method=rl", "policy=models/no_such_policy"], "no such run directory"),
-    ([f"traj={ROW}", "method=mpgd", "policy=models/industrial_td3"], "policy= is for method=rl"),
+    ([f"traj={ROW}", "method=mpgd", "policy=models/industrial/industrial_td3"], "policy= is for method=rl"),
     ([f"traj={ROW}", "method=gd"], "method must be mpgd or rl"),
     ([f"traj={ROW}"], "missing method="),
 ])

@@ -12,6 +12,7 @@ import pytest
 from pathrl.cli.dataset import main
 from pathrl.dataset.io import DatasetError, load_dataset, load_pathset
 from pathrl.dataset.waypoints import as_dataset, read_path_file
+from pathrl.models import model_dir
 from pathrl.paths.knots import KnotStrategy
 from pathrl.robot.external import load_robot_by_name
 
@@ -92,7 +93,7 @@ def test_a_single_path_file_is_followed_evaluated_and_solved_by_toppra(tmp_path,
     knots = np.linspace(_inside(iiwa, 1, 3)[0], _inside(iiwa, 1, 4)[0], 6)
     src = tmp_path / "one.csv"
     np.savetxt(src, knots, delimiter=",")
-    follower = Follower.load(ROOT / "models" / "iiwa7_random")
+    follower = Follower.load(model_dir("iiwa7_random"))
     follower.reset(read_path_file(src, iiwa))
     for _ in range(300):
         follower.decide()
@@ -104,7 +105,7 @@ def test_a_single_path_file_is_followed_evaluated_and_solved_by_toppra(tmp_path,
     assert toppra_main(["robot=iiwa7", f"dataset.path={src}", "segments=full", "workers=1",
                         f"out={tmp_path / 'toppra.json'}"]) == 0
     assert (tmp_path / "toppra.json").is_file()
-    assert eval_main(["run_dir=" + str(ROOT / "models" / "iiwa7_random"), f"dataset.path={src}", "segments=full",
+    assert eval_main(["run_dir=" + str(model_dir("iiwa7_random")), f"dataset.path={src}", "segments=full",
                       f"out={tmp_path / 'eval'}"]) == 0
     capsys.readouterr()
     with pytest.raises(DatasetError, match="unknown path file type"):

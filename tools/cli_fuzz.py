@@ -106,23 +106,23 @@ CASES: tuple[Case, ...] = (
     _c("eval: no summary.json", EVAL, _E + "run_dir={fix}/nosum|out={fix}/o", "summary.json is missing"),
     _c("eval: summary.json without knot_gap_norm", EVAL, _E + "run_dir={fix}/nogap|out={fix}/o",
        "has no knot_gap_norm"),
-    _c("eval: out is a file", EVAL, _E + "run_dir={root}/models/iiwa7_random|out={fix}/afile", "is a file"),
-    _c("eval: out under a file", EVAL, _E + "run_dir={root}/models/iiwa7_random|out={fix}/afile/o",
+    _c("eval: out is a file", EVAL, _E + "run_dir={root}/models/tracking/iiwa7_random|out={fix}/afile", "is a file"),
+    _c("eval: out under a file", EVAL, _E + "run_dir={root}/models/tracking/iiwa7_random|out={fix}/afile/o",
        "{fix}/afile is a file, not a directory"),
     _c("eval: out/episodes.mcap a directory", EVAL, "episodes=2|dataset.path={root}/datasets/iiwa7/random|"
-       "run_dir={root}/models/iiwa7_random|out={fix}/evalout", "episodes.mcap is a directory"),
-    _c("eval: out inside models/", EVAL, _E + "run_dir={root}/models/iiwa7_random|out={root}/models/iiwa7_random",
-       "inside models/"),
-    _c("eval: out unwritable (/proc)", EVAL, _E + "run_dir={root}/models/iiwa7_random|out=/proc/pathrl_eval",
+       "run_dir={root}/models/tracking/iiwa7_random|out={fix}/evalout", "episodes.mcap is a directory"),
+    _c("eval: out inside models/", EVAL,
+       _E + "run_dir={root}/models/tracking/iiwa7_random|out={root}/models/tracking/iiwa7_random", "inside models/"),
+    _c("eval: out unwritable (/proc)", EVAL, _E + "run_dir={root}/models/tracking/iiwa7_random|out=/proc/pathrl_eval",
        "cannot write in /proc"),
-    _c("eval: write_models not a bool", EVAL, _E + "run_dir={root}/models/iiwa7_random|write_models=maybe",
+    _c("eval: write_models not a bool", EVAL, _E + "run_dir={root}/models/tracking/iiwa7_random|write_models=maybe",
        "write_models must be true or false"),
     _c("export: no summary.json", EXPORT, "run_dir={fix}/nosum|out={fix}/o", "summary.json is missing"),
     _c("export: summary.json without knot_gap_norm", EXPORT, "run_dir={fix}/nogap|out={fix}/o", "has no knot_gap_norm"),
-    _c("export: out is a file", EXPORT, "run_dir={root}/models/iiwa7_random|out={fix}/afile", "is a file"),
-    _c("export: out/actor.onnx a directory", EXPORT, "run_dir={root}/models/iiwa7_random|out={fix}/exportout",
+    _c("export: out is a file", EXPORT, "run_dir={root}/models/tracking/iiwa7_random|out={fix}/afile", "is a file"),
+    _c("export: out/actor.onnx a directory", EXPORT, "run_dir={root}/models/tracking/iiwa7_random|out={fix}/exportout",
        "actor.onnx is a directory"),
-    _c("export: out unwritable (/proc)", EXPORT, "run_dir={root}/models/iiwa7_random|out=/proc/pathrl_export",
+    _c("export: out unwritable (/proc)", EXPORT, "run_dir={root}/models/tracking/iiwa7_random|out=/proc/pathrl_export",
        "cannot write in /proc"),
     _c("toppra: out is a directory", TOPPRA, _P + "out={fix}/adir", "out={fix}/adir is a directory"),
     _c("toppra: out under a file", TOPPRA, _P + "out={fix}/afile/t.json", "{fix}/afile is a file"),
@@ -195,8 +195,8 @@ def _episode_json(knots, scale: float = 1.0) -> str:
 
 
 def _model_copy(dest: Path, summary: dict | None) -> None:
-    """models/iiwa7_random at `dest`, its summary.json replaced by `summary` (None: removed)."""
-    shutil.copytree(ROOT / "models" / "iiwa7_random", dest)
+    """models/tracking/iiwa7_random at `dest`, its summary.json replaced by `summary` (None: removed)."""
+    shutil.copytree(ROOT / "models" / "tracking" / "iiwa7_random", dest)
     (dest / "summary.json").unlink()
     if summary is not None:
         (dest / "summary.json").write_text(json.dumps(summary))

@@ -1,6 +1,6 @@
 """GPU check: does pathrl train on this machine's GPU, correctly and how fast? One script, a 5-minute budget on one GPU.
 
-    python tools/gpu_check.py --install --model models/iiwa7_ball_balancing_distill   # first run on a GPU machine
+    python tools/gpu_check.py --install --model models/tracking/iiwa7_ball_balancing_distill  # first run on a GPU
     python tools/gpu_check.py --model DIR [--dataset DIR] [--out bench/gpu.json]
     python tools/gpu_check.py --dry-run --model DIR                                    # the whole flow, CPU, tiny
     python tools/gpu_check.py --pack gpu_check.tar.gz --model DIR    # the copy to ship to a GPU machine, and stop

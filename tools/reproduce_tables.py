@@ -11,7 +11,8 @@ The plan, its steps and the rendering: pathrl/repro/ (plan.py, steps.py, run.py,
 
 Profiles: full (1200 paper segments per evaluation, the committed test splits and models/); quick (12 episodes;
 with --train tiny datasets and trainings under results/quick/: the whole pipeline in minutes, meaningless numbers).
---train (TRAIN=1) trains (resumes) every policy first and ships it to models/<model>. Evaluations run --jobs at a
+--train (TRAIN=1) trains (resumes) every policy first and ships it to models/<family>/<model>. Evaluations run
+--jobs at a
 time (JOBS=N; default the CPU count, at most 8); the real-time measurements run last, one at a time.
 
     tools/reproduce_tables.py [--profile full|quick] [--train] [--only MODEL,...] [--reuse] [--out DIR] [--jobs N]

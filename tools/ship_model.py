@@ -1,11 +1,11 @@
-"""Turn a training run into a shipped model directory (models/<experiment>/).
+"""Turn a training run into a shipped model directory (models/<family>/<experiment>/).
 
 Copies the resolved config and training summary and the last checkpoint without its optimizer
 state (actor + critic weights only). Evaluate it afterwards with
-`pathrl-eval run_dir=models/<name>` (writes runs/eval/<name>/metrics.json; into the model's folder only with
-`out=models/<name> write_models=true`).
+`pathrl-eval run_dir=models/<family>/<name>` (writes runs/eval/<name>/metrics.json; into the model's folder only with
+`out=models/<family>/<name> write_models=true`).
 
-    tools/ship_model.py runs/<experiment>/seed0 models/<experiment>
+    tools/ship_model.py runs/<experiment>/seed0 models/<family>/<experiment>
 """
 
 from __future__ import annotations

@@ -47,7 +47,7 @@ __all__ = ["BalanceCfg", "BalanceController", "BalanceLaw", "chain_matrix", "cor
 class BalanceCfg:
     """Gains of the leg balance law; ``policy``: model directory whose network moves the upper body."""
 
-    policy: str = "models/armar4_legs_target_point_balancing"
+    policy: str = "models/tracking/armar4_legs_target_point_balancing"
     kp_ankle: float = 0.0  # ankle correction per rad of foot tilt (rad/rad); > 0 oscillated in PyBullet (docs)
     kd_ankle: float = 0.0  # ankle correction per rad/s of foot tilt rate (rad s/rad)
     kp_hip: float = 0.0  # hip correction per rad of foot tilt

@@ -1,6 +1,7 @@
 """Model-based controllers that evaluate like a policy: ``controller: {name: ..., <cfg keys>}`` in a model directory's
-config.yaml (``models/iiwa7_ball_tray_controller``), or ``teacher: {...}`` of a distillation run. The registry and the
-check of a spec are here; :func:`pathrl.runs.make_controller` builds one (and loads a policy network it drives)."""
+config.yaml (``models/tracking/iiwa7_ball_tray_controller``), or ``teacher: {...}`` of a distillation run. The
+registry and the check of a spec are here; :func:`pathrl.runs.make_controller` builds one (and loads a policy network
+it drives)."""
 
 from __future__ import annotations
 

@@ -13,6 +13,7 @@ import numpy as np
 import torch
 
 from pathrl.deploy.fuzz import fuzz_follower
+from pathrl.models import model_dir
 
 __all__ = ["FOLLOWER_END", "FOLLOWER_MODELS", "ROOT", "bench_follower", "bench_follower_end", "follower_benches",
            "follower_fuzz", "load_avg"]
@@ -119,11 +120,12 @@ def load_avg() -> list[float] | None:
         return None
 
 
-FOLLOWER_MODELS = (("models/iiwa7_random", "datasets/iiwa7/random"), ("models/armar6_random", "datasets/armar6/random"))
+FOLLOWER_MODELS = (("models/tracking/iiwa7_random", "datasets/iiwa7/random"),
+                   ("models/tracking/armar6_random", "datasets/armar6/random"))
 
 
-FOLLOWER_END = (("models/iiwa7_random", "datasets/iiwa7/random"),
-                ("models/iiwa7_random_track_distill", "datasets/iiwa7/random"))
+FOLLOWER_END = (("models/tracking/iiwa7_random", "datasets/iiwa7/random"),
+                ("models/tracking/iiwa7_random_track_distill", "datasets/iiwa7/random"))
 
 
 def follower_benches(res: dict, quick: bool) -> None:
@@ -142,5 +144,5 @@ def follower_fuzz(quick: bool) -> dict:
     """The follower under adversarial paths, path changes, stops and measured states (pathrl.deploy.fuzz), 300 trials
     (10 with `quick`), with the load average at its start and end (its time depends on it)."""
     start = load_avg()
-    fuzz = fuzz_follower(ROOT / "models" / "iiwa7_random", 10 if quick else 300)
-    return {**asdict(fuzz), "model": "models/iiwa7_random", "load_avg": [start, load_avg()]}
+    fuzz = fuzz_follower(model_dir("iiwa7_random"), 10 if quick else 300)
+    return {**asdict(fuzz), "model": "models/tracking/iiwa7_random", "load_avg": [start, load_avg()]}

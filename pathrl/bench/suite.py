@@ -27,6 +27,7 @@ from pathrl.bench.env import (
 )
 from pathrl.bench.follower import ROOT, follower_benches, follower_fuzz, load_avg
 from pathrl.eval.limit_fuzz import fuzz_env, fuzz_report
+from pathrl.models import model_ref
 from pathrl.repro import trueadapt as adapt
 from pathrl.storage import write_json_atomic
 
@@ -36,7 +37,7 @@ __all__ = ["FAMILY_TIMING", "MODES", "family_timing", "follower_only", "machine"
 MODES = {"native": "", "torch": "_torch", "eager": "_eager"}
 #: The families whose realtime timing is benched: (result key, family, model directory, test split, decisions and,
 #: with ``quick``, fewer): the TrueAdapt decision (policy + valid range + setpoints, 50 ms cycle).
-FAMILY_TIMING = (("trueadapt_decision", "trueadapt", f"models/{adapt.REALTIME_MODEL}",
+FAMILY_TIMING = (("trueadapt_decision", "trueadapt", model_ref(adapt.REALTIME_MODEL),
                   f"datasets/{adapt.ROBOT}/{adapt.REALTIME_DATA}", 2000, 100),)
 
 

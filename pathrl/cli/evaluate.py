@@ -1,6 +1,6 @@
 """``pathrl-eval``: evaluate a training run or a shipped model directory.
 
-    pathrl-eval run_dir=models/iiwa7_random [dataset=NAME | dataset.path=DIR] [split=test]
+    pathrl-eval run_dir=models/tracking/iiwa7_random [dataset=NAME | dataset.path=DIR] [split=test]
                 [episodes=N] [segments=paper|full] [seed=0] [out=DIR] [write_models=true|false]
                 [record=true|false] [num_envs=1200]
                 [task=ball_on_plate|standing] [backend=pybullet|analytic] [compile_limits=true|false]
@@ -12,12 +12,12 @@ The arguments are Hydra overrides of ``conf/eval_app.yaml`` (schema :class:`path
 task to a run trained without one (its sensor values stay unobserved); runs with a task are simulated with
 ``backend`` (default PyBullet). ``open_loop=true`` freezes the task's sensor at its first value of each episode.
 ``checkpoint`` evaluates that checkpoint of a training run instead of its latest. ``run_dir`` may also be a
-model-based controller's directory (``models/iiwa7_ball_tray_controller``), or a run of another task family
+model-based controller's directory (``models/tracking/iiwa7_ball_tray_controller``), or a run of another task family
 (:mod:`pathrl.families`, found by :func:`~pathrl.families.family_of`): a TrueAdapt run or model is evaluated on
 ``episodes`` trajectories (default 1000) of its split with Table I's metrics (``backend``, ``open_loop``,
 ``checkpoint`` and ``workers``, its PyBullet worker processes, apply; no ``episodes.mcap``), an industrial policy
 (``pathrl-industrial train``) by its learned IWA on the first ``episodes`` rows of Table II. ``metrics.json`` and
-``episodes.mcap`` go to ``out``, by default the run directory; a shipped model's (``models/<name>``) go to
+``episodes.mcap`` go to ``out``, by default the run directory; a shipped model's (``models/<family>/<name>``) go to
 ``runs/eval/<name>``: nothing is written inside ``models/`` unless ``write_models=true``. The output directory is
 checked before the evaluation runs.
 """

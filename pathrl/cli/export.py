@@ -1,6 +1,6 @@
 """``pathrl-export``: a shipped policy's actor (with its observation normaliser) to TorchScript and ONNX.
 
-    pathrl-export run_dir=models/iiwa7_random [out=DIR] [dataset.path=DIR] [observations=1000]
+    pathrl-export run_dir=models/tracking/iiwa7_random [out=DIR] [dataset.path=DIR] [observations=1000]
 
 Writes ``actor.pt``, ``actor.onnx`` and ``export.json`` to ``out`` (default ``<run_dir>/export``; checked before the
 export runs) and checks both

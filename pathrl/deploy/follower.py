@@ -1,6 +1,6 @@
 """Run a trained path-tracking policy in a robot's control loop: one robot, numpy in and out, no Hydra.
 
-    follower = Follower.load("models/iiwa7_random", control_rate=500)
+    follower = Follower.load("models/tracking/iiwa7_random", control_rate=500)
     follower.reset(knots)                   # (K, M) path knots; the robot is at rest at the first knot
     while not follower.done:                # done: at rest on the last knot (within SETTLE_TOLERANCE)
         sp = follower.decide()              # Setpoints for the next 0.1 s, 50 at 500 Hz

@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Any
 
 from pathrl.config.paper import load as load_paper
+from pathrl.models import model_path
 from pathrl.repro import trueadapt as adapt
 from pathrl.repro.figures import CURVES, learning_curves, pareto_table_ii, path_overlay
 from pathrl.repro.layout import ROOT, Layout, Profile
@@ -42,7 +43,7 @@ def collect(lay: Layout) -> dict[str, Any]:
         "evaluations": _json_files({e.id: raw / e.id / "metrics.json" for e in evaluations() if shipped(e, lay)}),
         "baselines": _json_files({b.id: raw / f"{b.id}.json" for b in baselines()}), "training": {}}
     for model in dict.fromkeys(m for e in evaluations() for m in (*warm_chain(e.model), e.model)):
-        if (record := training_record(lay.models / model)) is not None:
+        if (record := training_record(model_path(model, lay.models))) is not None:
             res["training"][model] = record
     res["path_change"] = _json_files({key: path_change_file(lay, key) for key, _, _ in PATH_CHANGE})
     res["realtime"] = _json_files({key: raw / f"realtime_{key}.json" for key, _, _ in REALTIME})
@@ -73,7 +74,7 @@ def write_outputs(lay: Layout, profile: Profile) -> str:
         if eid in res["evaluations"] and mcap.is_file():
             path_overlay(mcap, res["evaluations"][eid], title, figs / f"paths_{eid}.png")
     for name, (title, models) in CURVES.items():
-        files = {m: lay.models / m / "curve.csv" for m in models}
+        files = {m: model_path(m, lay.models) / "curve.csv" for m in models}
         curves = {m: read_curve(f) for m, f in files.items() if f.is_file()}
         learning_curves(curves, title, figs / f"learning_curve_{name}.png")
     return md

@@ -262,7 +262,8 @@ def _training(results: dict[str, Any]) -> list[str]:
     if not budgets:
         return []
     lines = ["## Training budgets of the shipped policies", "",
-             "From `models/<policy>/summary.json`; wall time on the 2-core reference machine, not always idle (a "
+             "From `models/<family>/<policy>/summary.json`; wall time on the 2-core reference machine, not always "
+             "idle (a "
              "warm-started policy's budget excludes its source's). The authors' budget from their checkpoints' "
              "metadata.", "",
              "| policy | trained by | iterations | env steps (M) | envs | wall time (min) | warm start from | "

@@ -17,6 +17,7 @@ from pathlib import Path
 
 import yaml
 
+from pathrl.models import model_path
 from pathrl.repro import trueadapt as adapt
 from pathrl.repro.inputs import fingerprint, record, stale
 from pathrl.repro.layout import ROOT, Layout, Profile, rel
@@ -65,14 +66,14 @@ def kept(result: Path, inputs: dict[str, str], reuse: bool, label: str) -> bool:
 
 def shipped(e: Evaluation, lay: Layout) -> bool:
     """Whether the policy of ``e`` is shipped (rows of policies that are not show a dash)."""
-    model = lay.models / e.model
+    model = model_path(e.model, lay.models)
     controller = e.model in CONTROLLER_MODELS and (model / "config.yaml").is_file()  # evaluated, never trained
     return (model / "model.pt").is_file() or any(model.glob("model_*.pt")) or controller
 
 
 def evaluate(e: Evaluation, profile: Profile, lay: Layout, reuse: bool, logs: Path) -> None:
     """``pathrl-eval`` of a shipped policy on its test split into ``raw/<id>/``, its inputs recorded beside it."""
-    model = lay.models / e.model
+    model = model_path(e.model, lay.models)
     raw = lay.out / "raw" / e.id
     if not shipped(e, lay):
         return
@@ -110,13 +111,14 @@ def toppra(b: Baseline, profile: Profile, lay: Layout, reuse: bool, logs: Path, 
 
 #: The motion-profile tables of the third paper (`pathrl-industrial`, docs/industrial.md): (subcommand, output key,
 #: file in the output dir, overrides). The shipped TD3 policies are evaluated; MPGD and bisection run in full.
-INDUSTRIAL = (("table2", "out_table2", "industrial_table2.md", ("policy=models/industrial_td3",)),
+INDUSTRIAL = (("table2", "out_table2", "industrial_table2.md", ("policy=models/industrial/industrial_td3",)),
               ("table2", "out_table2", "industrial_table2_noise.md",
-               ("policy=models/industrial_td3", "controller.noise_mm=0.05", "controller.runs=5", "seed_runs=[]")),
+               ("policy=models/industrial/industrial_td3", "controller.noise_mm=0.05", "controller.runs=5",
+                "seed_runs=[]")),
               ("validate", "out_validation", "industrial_validation.md", ()),
-              ("timing", "out_timing", "industrial_timing.md", ("policy=models/industrial_td3",)),
+              ("timing", "out_timing", "industrial_timing.md", ("policy=models/industrial/industrial_td3",)),
               ("speed", "out_speed", "industrial_speed.md", ()),
-              ("speed", "out_speed", "industrial_speed_rl.md", ("policy=models/industrial_td3",)),
+              ("speed", "out_speed", "industrial_speed_rl.md", ("policy=models/industrial/industrial_td3",)),
               ("table4", "out_table4", "industrial_table4.md", ()),
               ("sweep", "out_sweep", "industrial_baseline_sweep.md", ("sweep_speeds=[100,250,400,700,1100]",)))
 
@@ -136,7 +138,7 @@ def adapt_evaluate(a: adapt.AdaptEval, profile: Profile, lay: Layout, reuse: boo
     missing), its inputs recorded beside it."""
     result = lay.out / "raw" / a.id / "metrics.json"
     data = ROOT / ("datasets" if a.split == "test" else "data") / adapt.ROBOT / a.dataset
-    inputs = fingerprint(ROOT, ROOT / "models" / a.run, data)
+    inputs = fingerprint(ROOT, model_path(a.run), data)
     cmd = adapt.eval_command(a, ROOT, lay.out / "raw", profile.episodes or adapt.EPISODES,
                              kept(result, inputs, reuse, a.id))
     if cmd is not None:
@@ -169,13 +171,14 @@ def path_change_file(lay: Layout, key: str) -> Path:
 def path_change(key: str, model: str, split: str, profile: Profile, lay: Layout, reuse: bool, logs: Path) -> None:
     """The path changes of a shipped `model` on `split` (skipped when it is not shipped), its inputs recorded."""
     out = path_change_file(lay, key)
-    if not (lay.models / model / "model.pt").is_file():
+    model_dir = model_path(model, lay.models)
+    if not (model_dir / "model.pt").is_file():
         return
-    inputs = fingerprint(ROOT, lay.models / model, lay.test_data / split)
+    inputs = fingerprint(ROOT, model_dir, lay.test_data / split)
     if kept(out, inputs, reuse, f"path changes {key}"):
         return
     episodes = 10 if profile.name == "quick" else 200
-    sh([sys.executable, "-m", "pathrl.eval.path_change", str(lay.models / model), str(lay.test_data / split),
+    sh([sys.executable, "-m", "pathrl.eval.path_change", str(model_dir), str(lay.test_data / split),
         str(out), "--episodes", str(episodes)], logs / f"{out.stem}.log")
     record(out, inputs)
 
@@ -217,7 +220,7 @@ def training_jobs(evals: list[Evaluation]) -> dict[str, Evaluation]:
 
 def train_and_ship(model: str, e: Evaluation, profile: Profile, lay: Layout, logs: Path) -> None:
     """Train (resume) `model` on the robot and dataset of `e` (generated first if missing) and ship it to
-    ``<models>/<model>``."""
+    ``<models>/<family>/<model>``."""
     from pathrl.train.ship import ship
 
     data = lay.train_data / e.data_robot / e.dataset
@@ -226,8 +229,8 @@ def train_and_ship(model: str, e: Evaluation, profile: Profile, lay: Layout, log
             f"dataset.num_train={profile.num_train}", f"dataset.num_test={profile.num_test}",
             f"dataset.path={data}"], logs / f"dataset_{e.data_robot}_{e.dataset}.log")
     run_dir = lay.runs / model / "seed0"
-    warm = [f"init_from={lay.models / WARM_STARTS[model]}"] if model in WARM_STARTS else []
+    warm = [f"init_from={model_path(WARM_STARTS[model], lay.models)}"] if model in WARM_STARTS else []
     sh([str(BIN / "pathrl-train"), f"+experiment={model}", "resume=true", f"run_dir={run_dir}",
         f"dataset.path={data}", f"compile_limits={str(profile.compile_limits).lower()}", *profile.train_overrides,
         *warm], logs / f"train_{model}.log")
-    ship(run_dir, lay.models / model)
+    ship(run_dir, model_path(model, lay.models))

@@ -18,6 +18,8 @@ from typing import Any
 
 import yaml
 
+from pathrl.models import ModelError, model_name
+
 __all__ = ["SWEEPS_DIR", "RowSpec", "SweepsError", "TableSpec", "load_table", "load_tables", "warm_starts"]
 
 #: ``pathrl/sweeps`` (``sweeps/`` in a checkout is a symlink to it).
@@ -44,7 +46,7 @@ class RowSpec:
     key: str  # row key in the paper's table (pathrl/config/paper/tracking.yaml)
     evaluation: Any  # an instance of the evaluation class given to load_table (pathrl.repro.tables.Evaluation)
     not_in_paper: bool = False  # the paper has no such row (shown with a dash for its value)
-    controller: bool = False  # models/<model> holds a model-based controller: evaluated, never trained
+    controller: bool = False  # models/<family>/<model> holds a model-based controller: evaluated, never trained
 
 
 @dataclass(frozen=True)
@@ -151,15 +153,16 @@ def _init_from(experiments: dict[str, dict[str, Any]], name: str, seen: tuple[st
 
 
 def warm_starts(experiment_dir: Path) -> dict[str, str]:
-    """``{experiment: source}`` for every experiment trained from a shipped policy (``init_from: models/<source>``,
-    its own or inherited through its defaults list), in file-name order."""
+    """``{experiment: source}`` for every experiment trained from a shipped policy
+    (``init_from: models/<family>/<source>``, its own or inherited through its defaults list), in file-name order."""
     experiments = {p.stem: _read(p) or {} for p in sorted(experiment_dir.glob("*.yaml"))}
     out: dict[str, str] = {}
     for name in experiments:
         _, value = _init_from(experiments, name)
         if value is None:
             continue
-        if not isinstance(value, str) or not value.startswith("models/") or "/" in value[len("models/"):]:
-            raise SweepsError(f"experiment/{name}.yaml: init_from must be models/<model>, got {value!r}")
-        out[name] = value[len("models/"):]
+        try:
+            out[name] = model_name(value)
+        except ModelError as err:
+            raise SweepsError(f"experiment/{name}.yaml: init_from: {err}") from None
     return out

@@ -32,7 +32,7 @@ SHORT_COLUMNS = ("duration_s", "cart_pos_dev_mean_cm", "cart_pos_dev_max_cm", "c
 
 @dataclass(frozen=True)
 class Evaluation:
-    """`models/<model>` evaluated on `data/<robot>/<dataset>` (test split)."""
+    """`models/<family>/<model>` evaluated on `data/<robot>/<dataset>` (test split)."""
 
     model: str
     robot: str
@@ -164,7 +164,7 @@ NOT_IN_PAPER = frozenset((TABLE_FILES[name], r.key) for name, spec in SWEEPS.ite
 CONTROLLER_MODELS = frozenset(r.evaluation.model for spec in SWEEPS.values() for r in spec.rows if r.controller)
 
 #: Rows trained from another row's policy: {model: source} from conf/experiment/<model>.yaml's
-#: ``init_from: models/<source>`` (own or through its defaults list).
+#: ``init_from: models/<family>/<source>`` (own or through its defaults list).
 WARM_STARTS = warm_starts(CONF_DIR / "experiment")
 
 

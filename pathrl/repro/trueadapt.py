@@ -3,7 +3,7 @@
 Each row is a setting of the paper; ``AdaptEval`` says which shipped policy (or the reference without adaptation, or
 a model-based controller) fills our cells, on which split and ball. Every step goes through the TrueAdapt family's
 registry (:mod:`pathrl.families.trueadapt`): an evaluation is ``pathrl-eval`` of a model directory (the reference's:
-``models/iiwa7_trueadapt_<task>_reference``) into ``results/raw/<id>/metrics.json``; the 10^5-trajectory limit
+``models/trueadapt/iiwa7_trueadapt_<task>_reference``) into ``results/raw/<id>/metrics.json``; the 10^5-trajectory limit
 validation (Sec. VI-D) is its ``validate`` step into ``results/raw/trueadapt_validation.json``, the time per decision
 its ``timing`` step into ``results/raw/trueadapt_realtime.json`` (both run by :mod:`pathrl.cli.family_step`). The
 paper's values are ``pathrl/config/paper/trueadapt.yaml`` (:mod:`pathrl.config.paper`). Rendering is a pure function
@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from pathrl.config.paper import load as load_paper
+from pathrl.models import model_path
 from pathrl.repro.tables import training_record
 
 __all__ = [
@@ -55,7 +56,7 @@ TRAIN_MISSING = ("not available: needs the uncommitted train split data/iiwa7/tr
 
 @dataclass(frozen=True)
 class AdaptEval:
-    """`models/<model>` (None: the reference without adaptation) on trajectories 0..EPISODES-1 of a split of
+    """`models/trueadapt/<model>` (None: the reference without adaptation) on trajectories 0..EPISODES-1 of a split of
     ``trueadapt_<task>``, deterministic, seed 0."""
 
     task: str  # on_plate | in_place
@@ -71,8 +72,8 @@ class AdaptEval:
 
     @property
     def run(self) -> str:
-        """Its directory under ``models/``: the model's, or for the reference without adaptation the controller
-        ``reference`` on the task's experiment config (``models/iiwa7_trueadapt_<task>_reference``)."""
+        """Its name under ``models/trueadapt/``: the model's, or for the reference without adaptation the
+        controller ``reference`` on the task's experiment config (``iiwa7_trueadapt_<task>_reference``)."""
         return self.name
 
     @property
@@ -122,14 +123,15 @@ _STUDENT_F10 = "distilled policy, ten following positions in its state (the pape
 
 def _ablation_row(key: str, part: str, variant: str, left_out: str) -> AdaptRow:
     """The on-plate row "state without <part>": the on-plate student's recipe (DISTILL) without `left_out` in its
-    state, ``models/iiwa7_trueadapt_on_plate_distill_<variant>``."""
+    state, ``models/trueadapt/iiwa7_trueadapt_on_plate_distill_<variant>``."""
     return AdaptRow(f"on_plate/{key}", f"on plate: state without {part}", f"{_STUDENT} without {left_out} in its state",
                     AdaptEval("on_plate", f"iiwa7_trueadapt_on_plate_distill_{variant}"))
 
 
 def _scratch_row(key: str, setting: str, variant: str) -> AdaptRow:
     """The on-plate ablation `key` (`setting`) trained the paper's way:
-    ``models/iiwa7_trueadapt_on_plate_ppo_scratch_<variant>``, the from-scratch recipe of SCRATCH so changed."""
+    ``models/trueadapt/iiwa7_trueadapt_on_plate_ppo_scratch_<variant>``, the from-scratch recipe of SCRATCH so
+    changed."""
     return AdaptRow(f"on_plate/{key}_scratch", f"on plate: {setting}", f"**PPO from scratch**, {setting}",
                     AdaptEval("on_plate", f"{SCRATCH}_{variant}"),
                     in_paper=False, paper_row=f"on_plate/{key}")
@@ -236,7 +238,7 @@ def eval_command(e: AdaptEval, root: Path, raw: Path, episodes: int, reuse: bool
     data = root / ("datasets" if e.split == "test" else "data")
     if unavailable(e, root / "models", data) is not None or (reuse and (out / "metrics.json").is_file()):
         return None
-    return ["pathrl-eval", f"run_dir={_rel(root / 'models' / e.run, root)}",
+    return ["pathrl-eval", f"run_dir={_rel(model_path(e.run, root / 'models'), root)}",
             f"dataset.path={_rel(data / ROBOT / e.dataset, root)}", f"split={e.split}", f"episodes={episodes}",
             "seed=0", f"backend={e.backend}", "workers=1", f"num_envs={EVAL_ENVS}", f"out={_rel(out, root)}",
             *(["open_loop=true"] if e.open_loop else [])]
@@ -250,8 +252,9 @@ def validation_command(root: Path, raw: Path, trajectories: int, reuse: bool = F
     out = raw / f"{VALIDATION_ID}.json"
     if reuse and out.is_file():
         return None
-    return ["python", "-m", FAMILY_STEP, "trueadapt", "validate", _rel(root / "models" / VALIDATION_RUN, root),
-            _rel(out, root), f"num_envs={trajectories}", f"episodes={VALIDATION_STEPS}", "seed=0"]
+    run = _rel(model_path(VALIDATION_RUN, root / "models"), root)
+    return ["python", "-m", FAMILY_STEP, "trueadapt", "validate", run, _rel(out, root), f"num_envs={trajectories}",
+            f"episodes={VALIDATION_STEPS}", "seed=0"]
 
 
 def realtime_command(root: Path, raw: Path, models: Path, data: Path, decisions: int,
@@ -260,17 +263,18 @@ def realtime_command(root: Path, raw: Path, models: Path, data: Path, decisions:
     family's ``timing`` step of :data:`REALTIME_MODEL` on its test split, `decisions` decisions; None (`reuse` and
     the result exists, or the timed model is not shipped)."""
     out = raw / f"{REALTIME_ID}.json"
-    if (reuse and out.is_file()) or not (models / REALTIME_MODEL / "config.yaml").is_file():
+    if (reuse and out.is_file()) or not (model_path(REALTIME_MODEL, models) / "config.yaml").is_file():
         return None
-    return ["python", "-m", FAMILY_STEP, "trueadapt", "timing", _rel(models / REALTIME_MODEL, root), _rel(out, root),
+    return ["python", "-m", FAMILY_STEP, "trueadapt", "timing", _rel(model_path(REALTIME_MODEL, models), root),
+            _rel(out, root),
             f"dataset_path={_rel(data / ROBOT / REALTIME_DATA, root)}", f"episodes={decisions}"]
 
 
 def unavailable(e: AdaptEval, models: Path, data: Path) -> str | None:
     """Why `e` is not evaluated here (its model is not shipped, or it needs the uncommitted train split and
     `data` lacks it), or None. A missing committed test split is no reason: the evaluation fails loudly."""
-    if not (models / e.run / "config.yaml").is_file():
-        return f"{models / e.run} not shipped"
+    if not (model_path(e.run, models) / "config.yaml").is_file():
+        return f"{model_path(e.run, models)} not shipped"
     if e.split == "train" and not (data / ROBOT / e.dataset / "train.npz").is_file():
         return TRAIN_MISSING
     return None
@@ -297,9 +301,9 @@ def collect(raw: Path, models: Path, seeds: Path | None = None) -> dict[str, Any
                            "trueadapt_training": {}, "trueadapt_seeds": seed_results(seeds) if seeds else {}}
     for e in evaluations():
         p = raw / e.id / "metrics.json"
-        if p.is_file() and (e.model is None or (models / e.model).is_dir()):
+        if p.is_file() and (e.model is None or model_path(e.model, models).is_dir()):
             out["trueadapt"][e.id] = json.loads(p.read_text())
-        record = training_record(models / e.model) if e.model else None
+        record = training_record(model_path(e.model, models)) if e.model else None
         if record is not None:
             out["trueadapt_training"][e.model] = record
     for key in (VALIDATION_ID, REALTIME_ID):
@@ -365,33 +369,40 @@ CAPTION = (
     "Each cell: **ours** / paper. The ball is simulated in PyBullet for every row of ours (column *ball*; the "
     "scene draws the ball's radius, mass and friction, 2 mm sensor noise), on the 1000 trajectories of the committed "
     "test split (`datasets/iiwa7/trueadapt_<task>`; the paper: 10 000), deterministic actions, seed 0 "
-    "(`tools/trueadapt_eval.py`). *PPO from scratch* (`models/iiwa7_trueadapt_on_plate_ppo_scratch`): the paper's "
+    "(`tools/trueadapt_eval.py`). *PPO from scratch* (`models/trueadapt/iiwa7_trueadapt_on_plate_ppo_scratch`): the "
+    "paper's "
     "protocol, no teacher and no warm start: PPO on the paper's reward and state, 500 iterations of 4096 envs x 16 "
     "steps (32.8 M steps, the paper's 32 M), analytic ball in training; two choices of ours: the critic also sees the "
     "time left and the true ball state (the policy does not), and the action noise is held at or above 0.05 "
     "(without that floor PPO shrank it to 0.01 and learnt nothing in the same budget); in place "
-    "(`models/iiwa7_trueadapt_in_place_ppo_scratch`) the same recipe, 1300 iterations (85 M steps; the paper's "
+    "(`models/trueadapt/iiwa7_trueadapt_in_place_ppo_scratch`) the same recipe, 1300 iterations (85 M steps; the "
+    "paper's "
     "220 M). Error distance: mean "
     "distance of the ball from its start, the in-place metric; "
     "on plate ours is shown in brackets. Acceleration and jerk: mean normalised |a| and |jerk| over joints and "
     "steps. Limit violations: commanded 240 Hz setpoints outside the position, velocity, acceleration or jerk "
-    "limits (checked, not assumed). *Distilled policy*: `models/iiwa7_trueadapt_on_plate_distill_full`, a network "
+    "limits (checked, not assumed). *Distilled policy*: `models/trueadapt/iiwa7_trueadapt_on_plate_distill_full`, a "
+    "network "
     "with the paper's state taught by the tray controller (DAgger, a falling learning rate, its last checkpoint), not "
     "trained with PPO as the paper's; in place "
-    "`models/iiwa7_trueadapt_in_place_distill_f10_decay`, the same with ten following positions in the state (the "
+    "`models/trueadapt/iiwa7_trueadapt_in_place_distill_f10_decay`, the same with ten following positions in the "
+    "state (the "
     "paper's ablation state) and a falling learning rate, its last checkpoint. *Distilled policy + PPO* "
-    "(`models/iiwa7_trueadapt_on_plate_ppo`): the on-plate distilled policy trained on with PPO on the paper's "
+    "(`models/trueadapt/iiwa7_trueadapt_on_plate_ppo`): the on-plate distilled policy trained on with PPO on the "
+    "paper's "
     "reward, 250 iterations of 2048 envs x 16 steps (8.2 M steps), an asymmetric critic that also sees the time "
     "left and the true ball state, learning alone for the first 50; the penalty ablations are this run with one "
-    "penalty's weight 0; in place (`models/iiwa7_trueadapt_in_place_ppo`) the same recipe from the one-position "
-    "student (`models/iiwa7_trueadapt_in_place_distill_decay`), 600 iterations (19.7 M steps). *Tray "
-    "controller*: `models/iiwa7_trueadapt_<task>_tray_controller` (`pathrl/baselines/trueadapt_tray.py`), no "
+    "penalty's weight 0; in place (`models/trueadapt/iiwa7_trueadapt_in_place_ppo`) the same recipe from the "
+    "one-position "
+    "student (`models/trueadapt/iiwa7_trueadapt_in_place_distill_decay`), 600 iterations (19.7 M steps). *Tray "
+    "controller*: `models/trueadapt/iiwa7_trueadapt_<task>_tray_controller` (`pathrl/baselines/trueadapt_tray.py`), no "
     "learning; it reads privileged information a policy does not get (the whole reference with its velocities and "
     "accelerations, the plate kinematics, its own filter state), so it is a feasibility bound, not a result "
-    "comparable with the paper's. *State ablations* (`models/iiwa7_trueadapt_on_plate_distill_<variant>`): the "
+    "comparable with the paper's. *State ablations* (`models/trueadapt/iiwa7_trueadapt_on_plate_distill_<variant>`): "
+    "the "
     "on-plate student's recipe with one part of its state left out; the teacher is the same controller, so these rows "
     "measure what the network needs in order to copy it, not what PPO needs to learn the task. *From-scratch "
-    "ablations* (`models/iiwa7_trueadapt_on_plate_ppo_scratch_<variant>`): the paper's protocol for the same "
+    "ablations* (`models/trueadapt/iiwa7_trueadapt_on_plate_ppo_scratch_<variant>`): the paper's protocol for the same "
     "question, the from-scratch recipe and budget with one part of the state or one penalty removed, seed 0 (every "
     "seed below the table). *Trained by*: read from each shipped policy's config: PPO from scratch, PPO from "
     "<model> (a warm start), DAgger from <teacher>, or not trained. Rows without a trained policy of ours show a "

@@ -7,7 +7,7 @@ the direction of the pelvis lean when it crossed 30 deg, the peak lean before, a
 second before the fall (or over the whole episode when it did not fall).
 
     OMP_NUM_THREADS=1 PATHRL_THREADS=1 .venv/bin/python tools/lab/armar4_fall_study.py \
-        models/armar4_legs_target_point_balancing datasets/armar4/target_point 200 /tmp/a4_study.json \
+        models/tracking/armar4_legs_target_point_balancing datasets/armar4/target_point 200 /tmp/a4_study.json \
         [controller spec as JSON, e.g. '{"name": "balance"}'] [episodes of the plan, e.g. 24,43] [plan seed]
 """
 

@@ -36,7 +36,7 @@ from pathrl.robot.model import load_robot
 from pathrl.runs import load_policy, load_run, make_controller
 from pathrl.sim.standing import FALL_TILT_RAD, AnalyticStanding
 
-MODELS = ["models/armar4_legs_balance_controller", "models/armar4_legs_target_point_balancing"]
+MODELS = ["models/tracking/armar4_legs_balance_controller", "models/tracking/armar4_legs_target_point_balancing"]
 
 
 class Recorder:
