@@ -358,7 +358,8 @@ ROOT = Path(__file__).resolve().parents[1]
 SCRATCH = "iiwa7_trueadapt_on_plate_ppo_scratch"
 #: Each from-scratch ablation: how many policy inputs it drops (7 joints per state part; reward ablations drop none).
 ABLATIONS = {"": 0, "_no_position": 7, "_no_velocity": 7, "_no_acceleration": 7, "_no_following": 7,
-             "_no_acc_penalty": 0, "_no_jerk_penalty": 0}
+             "_no_acc_penalty": 0, "_no_jerk_penalty": 0, "_open_loop": 0, "_f10": -63}  # f10: 9 more positions
+IN_PLACE = "iiwa7_trueadapt_in_place_ppo_scratch"
 
 
 def _input_dims(checkpoint: Path) -> tuple[int, int]:
@@ -367,21 +368,22 @@ def _input_dims(checkpoint: Path) -> tuple[int, int]:
     return tuple(int(sd[f"{net}_state_dict"]["obs_normalizer._mean"].shape[1]) for net in ("actor", "critic"))
 
 
-@pytest.mark.parametrize("variant", list(ABLATIONS))
-def test_each_from_scratch_recipe_trains(variant, tiny_trueadapt, tmp_path):
-    """The TrueAdapt table's from-scratch rows, each for 2 tiny iterations: no warm start, the critic sees the policy's
-    state plus its privileged part, and a state ablation drops its part from both."""
+@pytest.mark.parametrize("full,variant", [(SCRATCH, v) for v in ABLATIONS] + [(IN_PLACE, ""), (IN_PLACE, "_open_loop")])
+def test_each_from_scratch_recipe_trains(full, variant, tiny_trueadapt, tmp_path):
+    """The TrueAdapt table's from-scratch rows of both tasks, each for 2 tiny iterations: no warm start, the critic
+    sees the policy's state plus its privileged part, and a state ablation drops its part from both."""
     from pathrl.cli.common import compose, to_container
     from pathrl.schema import TrainAppCfg
     from pathrl.train.runner import train
 
     run_dir = tmp_path / "run"
-    cfg = to_container(compose("train", [f"+experiment={SCRATCH}{variant}", f"dataset.path={tiny_trueadapt.path}",
+    cfg = to_container(compose("train", [f"+experiment={full}{variant}", f"dataset.path={tiny_trueadapt.path}",
                                          "iterations=2", "env.num_envs=16", f"run_dir={run_dir}",
                                          "compile_limits=false", "threads=1"], TrainAppCfg))
     assert cfg.get("init_from") is None
+    assert cfg["task"]["observe"] is (variant != "_open_loop")
     assert train(cfg, Path(run_dir))["iterations"] == 2
     actor, critic = _input_dims(run_dir / "model_1.pt")
-    full_actor, full_critic = _input_dims(model_dir(SCRATCH) / "model.pt")
+    full_actor, full_critic = _input_dims(model_dir(full) / "model.pt")
     assert critic > actor  # the asymmetric critic
     assert (full_actor - actor, full_critic - critic) == (ABLATIONS[variant], ABLATIONS[variant])
