@@ -130,7 +130,7 @@ def table2_markdown(rows: Sequence[Table2Row], command: str, note: str = "", pol
                        + ".")
     summary += [ilc_summary(rows, j, policy_name if has_rl else None) for j in range(len(ilc_names))]
     title = "# Industrial motion-profile optimisation: Table II (Baseline, MPGD" + (
-        f", {policy_name})" if has_rl else ")")
+        f", {policy_name}" if has_rl else "") + "".join(f", {n}" for n in ilc_names) + ")"
     text = [title, "",
             f"Measured with `{command}`.", "", *lines, "", *summary, ""]
     if note:

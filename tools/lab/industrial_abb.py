@@ -6,7 +6,7 @@
     .venv/bin/python tools/lab/industrial_abb.py table2 RUN_DIR [OUT.md]  # -> results/industrial_abb_table2.md
     .venv/bin/python tools/lab/industrial_abb.py critic RUN_DIR/model_K.pt  # the critic vs the one-step reward
 
-``table2`` runs MPGD, both ILC variants (their gains as tuned by ``ilc``: 1 and 1) and the policy of RUN_DIR
+``table2`` runs MPGD, both ILC variants (``ILCColumns``: the gains as tuned by ``ilc``, 1.5 and 1) and the policy of RUN_DIR
 on the nine rows and reports executions per row, ratios as means of per-row ratios with totals beside, t_opt
 measured and under the paper's cost model, and the distribution of the policy's first actions a1-a3.
 
@@ -110,7 +110,7 @@ def table2(run_dir: str) -> str:
 
     from pathrl.industrial.controller import ControllerParams
     from pathrl.industrial.experiments import select_targets
-    from pathrl.industrial.ilc import ILCParams, run_ilc
+    from pathrl.industrial.ilc import ILCColumns, run_ilc
     from pathrl.industrial.iwa_env import IWAEpisode, IWASettings
     from pathrl.industrial.mpgd import run_mpgd
     from pathrl.industrial.rl import run_policy_iwa
@@ -132,9 +132,8 @@ def table2(run_dir: str) -> str:
     first_actions, lines = [], []
     for t in select_targets([]):
         prog = baseline_program(t)
-        res = {"MPGD": run_mpgd(t, prog, t.speed, None, ctrl),
-               "ILC P": run_ilc(t, prog, t.speed, ILCParams("p", 1.0), ctrl),
-               "ILC filtered": run_ilc(t, prog, t.speed, ILCParams("filtered", 1.0), ctrl)}
+        res = {"MPGD": run_mpgd(t, prog, t.speed, None, ctrl)}
+        res.update({name: run_ilc(t, prog, t.speed, p, ctrl) for name, p in ILCColumns().variants("abb").items()})
         env = IWAEpisode(t, t.speed, ctrl, IWASettings(100, 10.0, 10, 2.0))
         res["RL"] = run_policy_iwa(env, policy)
         first_actions.append(policy(IWAEpisode(t, t.speed, ctrl).reset()))
