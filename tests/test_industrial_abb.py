@@ -95,10 +95,9 @@ def test_curve1_calibration_against_the_recording():
                      (fast.mean_err, rec_fast[1])):
         assert abs(got / rec - 1) <= 0.2
     assert slow.speed_std_pct <= 1.0 and abs(slow.mean_speed / 123.05 - 1) < 0.01
-    assert slow.max_at >= 0.8
-    # targets it misses, pinned at the documented measurement so the table stays true
-    assert slow.ramp95_s == pytest.approx(0.18, abs=0.01)  # target <= 0.15 s (recorded 0.10-0.12)
-    assert fast.max_at == pytest.approx(0.798, abs=0.01)  # the max at 79.8 % of the arc: the 80 % boundary
+    assert slow.max_at >= 0.8 and fast.max_at >= 0.8  # the max error in the last 20 % of the curve
+    assert slow.ramp95_s <= 0.15  # rest to 95 % of the command (recorded 0.10-0.12 s)
+    assert slow.ramp95_s == pytest.approx(0.108, abs=0.005) and fast.max_at == pytest.approx(0.997, abs=0.005)
 
 
 def test_tiny_ilc_run_lowers_the_error():
@@ -111,3 +110,92 @@ def test_tiny_ilc_run_lowers_the_error():
     for kind in ("p", "filtered"):
         res = run_ilc(target, prog, 300.0, ILCParams(kind=kind, gain=1.0, k_max=2), ctrl)
         assert res.executions >= 2 and res.errors.max_pos_mm < res.history[0]
+
+
+def test_path_noise_has_the_set_std_and_correlates_neighbours():
+    from pathrl.industrial.rl_train import path_noise
+
+    rng = np.random.default_rng(0)
+    white = np.stack([path_noise(rng, 100, 0.2, 0.0) for _ in range(200)])  # (200, 100, 3)
+    smooth = np.stack([path_noise(rng, 100, 0.2, 3.0) for _ in range(200)])
+    for x in (white, smooth):
+        assert x.std() == pytest.approx(0.2, rel=0.05)
+    corr = [np.corrcoef(x[:, 50, 0], x[:, 51, 0])[0, 1] for x in (white, smooth)]
+    # neighbours of a Gaussian-smoothed white sequence (width 3): exp(-1 / (4 * 3^2)) = 0.97; white: 0
+    assert abs(corr[0]) < 0.2 and corr[1] == pytest.approx(math.exp(-1 / 36), abs=0.05)
+
+
+def test_actor_stats_in_action_units():
+    from pathrl.industrial.rl_train import actor_stats
+
+    mean = np.array([[0.5, -1.0, 0.0], [0.5, 0.0, 0.99]])
+    out = actor_stats(mean, 2.0)
+    assert out == {"a1": 1.0, "a2": -1.0, "a3": 0.99, "at_clip": pytest.approx(2 / 6)}
+
+
+def test_critic_action_gain_scales_only_the_action_input():
+    import torch
+
+    from pathrl.industrial.rl import RLParams, _Critic
+
+    torch.manual_seed(0)
+    plain, scaled = _Critic([8]), _Critic([8], action_gain=10.0)
+    scaled.load_state_dict(plain.state_dict())
+    obs, act = torch.randn(4, 313), torch.rand(4, 3) * 0.1
+    assert torch.allclose(scaled(obs, act), plain(obs, 10.0 * act))
+    with pytest.raises(ValueError, match="critic_action_gain"):
+        RLParams(critic_action_gain=0.0)
+    with pytest.raises(ValueError, match="expl_smooth"):
+        RLParams(expl_smooth=-1.0)
+
+
+def test_ilc_columns_follow_the_controller_model():
+    from pathrl.industrial.ilc import ILCColumns
+
+    assert ILCColumns().variants("lag") == {}
+    both = ILCColumns().variants("abb")
+    assert list(both) == ["ILC P", "ILC filtered"] and both["ILC P"].kind == "p" and both["ILC P"].gain == 1.5
+    assert list(ILCColumns(columns="always").variants("lag")) == ["ILC P", "ILC filtered"]
+    assert ILCColumns(columns="never").variants("abb") == {}
+    with pytest.raises(ValueError, match="ilc.columns"):
+        ILCColumns(columns="sometimes")
+
+
+def test_table2_markdown_with_ilc_columns_and_per_row_ratios():
+    from pathrl.industrial.tables import Table2Row, per_row_ratio, table2_markdown
+
+    # MPGD 4 and 6 iterations, ILC 2 and 2 (a third row: ILC misses): ratios 2 and 3 -> mean 2.5, totals 10/4
+    assert per_row_ratio([4, 6, 9], [2, 2, None]) == (2, 2.5, 2.5)
+    assert per_row_ratio([None], [1]) is None and per_row_ratio([0], [2])[1] == 0.5  # 0 counts as 1
+    rows = [Table2Row("a", 1, 250.0, 2.0, 0.4, 4, 1.0, 5, ilc=(("ILC P", 0.45, 2),)),
+            Table2Row("b", 1, 250.0, 2.0, 0.4, 6, 1.0, 7, ilc=(("ILC P", 0.30, 2),)),
+            Table2Row("c", 1, 250.0, 2.0, 0.6, None, 1.0, 51, ilc=(("ILC P", 0.70, None),))]
+    text = table2_markdown(rows, "cmd")
+    assert "| ILC P err. (mm) | ILC P itr. |" in text and "| 0.70 | N/A |" in text
+    assert "ILC P reached 0.5 mm on 2/3, mean 2.0 iterations; MPGD / ILC P iterations on the 2 rows both " \
+           "reach: 2.50x (mean of per-row ratios; totals 2.50x)." in text
+    # without ILC the table is what it was (no ILC column)
+    assert "ILC" not in table2_markdown([Table2Row("a", 1, 250.0, 2.0, 0.4, 4, 1.0, 5)], "cmd")
+
+
+def test_joint_smoothing_window_shrinks_at_the_motion_ends():
+    from pathrl.industrial.planner import moving_average, moving_average_in_motion
+
+    # rest at 0 for samples 0-2, then a ramp 1, 2, ..., 6 (constant speed): a centred window never averages the
+    # rest in, so the ramp is kept exactly (a line is its own average); padding with rest ("hold") lags it
+    x = np.r_[np.zeros(3), np.arange(1.0, 7.0)][:, None]
+    out = moving_average_in_motion(x, 5, first=2, last=len(x) - 1)
+    assert np.allclose(out, x)
+    assert moving_average(x, 5)[3, 0] == pytest.approx((0 + 0 + 1 + 2 + 3) / 5)
+    # a kink is averaged over the full window inside the motion: samples 1..5 around 3 of |i - 3|
+    y = np.abs(np.arange(7.0) - 3.0)[:, None]
+    assert moving_average_in_motion(y, 5, 0, 6)[3, 0] == pytest.approx((2 + 1 + 0 + 1 + 2) / 5)
+
+
+def test_two_fine_points_at_rest_take_a_finite_time():
+    from pathrl.industrial.planner import PlannerParams, _time_law
+
+    # samples at 0, 1, 2 mm with the speed 0 at all three (fine points closer than the sampling): each 1 mm takes
+    # 2 sqrt(1 / 4000) s = 31.6 ms rest to rest at the TCP acceleration, not 1 mm / 0
+    st = _time_law(np.array([0.0, 1.0, 2.0]), np.zeros(3), PlannerParams(fir_s=0.0), 250.0)
+    assert abs((len(st) - 1) / 250.0 - 2 * 2 * np.sqrt(1 / 4000.0)) <= 1 / 250.0 and st[-1] == pytest.approx(2.0)

@@ -140,7 +140,8 @@ def _main(argv: list[str]) -> None:
         if cmd == "table2":
             policy, name = _policy(cfg.policy)
             iwa = IWASettings(cfg.waypoints, cfg.zone, k_max)
-            rows = experiments.run_table2(targets, controller, mpgd, iwa, cfg.seed, policy)
+            rows = experiments.run_table2(targets, controller, mpgd, iwa, cfg.seed, policy,
+                                          cfg.ilc.variants(controller.model))
             text = tables.table2_markdown(rows, command, note, name)
             if policy is not None and cfg.seed_runs:
                 text += _seed_summary(cfg, targets, rows)

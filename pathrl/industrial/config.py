@@ -8,6 +8,7 @@ from dataclasses import dataclass, field, fields
 from typing import Any
 
 from pathrl.industrial.controller import ControllerParams
+from pathrl.industrial.ilc import ILCColumns
 from pathrl.industrial.mpgd import MPGDParams
 from pathrl.industrial.rl import RLParams
 from pathrl.industrial.speed_search import SearchParams
@@ -31,6 +32,7 @@ adds their per-seed summary, ``validate`` scores them on ``validation_n`` traini
     mpgd: MPGDParams = field(default_factory=MPGDParams)
     search: SearchParams = field(default_factory=SearchParams)
     rl: RLParams = field(default_factory=RLParams)
+    ilc: ILCColumns = field(default_factory=ILCColumns)
     run_dir: str = "runs/industrial_td3/seed0"
     resume: bool = False
     policy: str = ""
@@ -67,7 +69,7 @@ def app_cfg(cfg: dict[str, Any]) -> IndustrialAppCfg:
     """The typed app config of a composed config mapping (every key of the schema), its values checked first
     (:func:`check_app`; ValueError on a bad value) and its groups as their parameter dataclasses (:func:`build`)."""
     controller, mpgd, search, rl = build(cfg)
-    groups = {"controller": controller, "mpgd": mpgd, "search": search, "rl": rl}
+    groups = {"controller": controller, "mpgd": mpgd, "search": search, "rl": rl, "ilc": ILCColumns(**cfg["ilc"])}
     return IndustrialAppCfg(**groups, **{f.name: cfg[f.name] for f in fields(IndustrialAppCfg) if f.name not in groups})
 
 

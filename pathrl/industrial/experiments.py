@@ -8,6 +8,7 @@ from collections.abc import Callable, Sequence
 import numpy as np
 
 from pathrl.industrial.controller import ControllerParams, execute
+from pathrl.industrial.ilc import ILCParams, run_ilc
 from pathrl.industrial.iwa_env import IWAEpisode, IWASettings
 from pathrl.industrial.metrics import evaluate
 from pathrl.industrial.mpgd import MPGDParams, run_mpgd
@@ -30,18 +31,23 @@ def select_targets(rows: Sequence[str]) -> list[Target]:
 
 def run_table2(targets: Sequence[Target], controller: ControllerParams, mpgd: MPGDParams,
                iwa: IWASettings | None = None, seed: int = 0,
-               policy: Callable[[np.ndarray], np.ndarray] | None = None) -> list[Table2Row]:
+               policy: Callable[[np.ndarray], np.ndarray] | None = None,
+               ilc: dict[str, ILCParams] | None = None) -> list[Table2Row]:
     """Baseline (the profile of ``iwa.m`` MoveL waypoints, zone ``iwa.zone``; `iwa` default :class:`IWASettings`)
     and MPGD (seed `seed`) on each target at its speed command; with a `policy` (features (m, 313) -> actions
-    (m, 3)) also the learned IWA (``iwa.k_max`` iterations)."""
+    (m, 3)) also the learned IWA (``iwa.k_max`` iterations); with `ilc` (column name -> settings) each ILC
+    variant from the same baseline (seed `seed`)."""
     iwa = iwa or IWASettings()
     rows = []
     for t in targets:
-        res = run_mpgd(t, baseline_program(t, iwa.m, iwa.zone), t.speed, mpgd, controller, seed)
+        prog = baseline_program(t, iwa.m, iwa.zone)
+        res = run_mpgd(t, prog, t.speed, mpgd, controller, seed)
         rl: dict[str, object] = {}
         if policy is not None:
             out = run_policy_iwa(IWAEpisode(t, t.speed, controller, iwa), policy)
             rl = {"rl_mm": out.errors.max_pos_mm, "rl_itr": out.iterations_to_spec, "rl_t": out.t_opt}
+        runs = {name: run_ilc(t, prog, t.speed, p, controller, seed) for name, p in (ilc or {}).items()}
+        rl["ilc"] = tuple((name, r.errors.max_pos_mm, r.iterations_to_spec) for name, r in runs.items())
         rows.append(Table2Row(t.name, t.pose, t.speed, res.history[0], res.errors.max_pos_mm,
                               res.iterations_to_spec, res.t_opt, res.executions, **rl))
     return rows

@@ -29,7 +29,7 @@ from pathrl.industrial.mpgd import IWAResult, iterate_waypoints
 from pathrl.industrial.program import Program
 from pathrl.industrial.trajectories import Target, baseline_program, waypoint_indices
 
-__all__ = ["ILCParams", "ilc_update", "plant_gain", "run_ilc", "tune_gain"]
+__all__ = ["ILCColumns", "ILCParams", "ilc_update", "plant_gain", "run_ilc", "tune_gain"]
 
 
 @dataclass(frozen=True)
@@ -48,6 +48,31 @@ class ILCParams:
             raise ValueError(f"ilc.kind must be 'p' or 'filtered', got {self.kind!r}")
         if not (self.gain > 0 and self.q_sigma >= 0 and 0 < self.g_min <= 1 and self.k_max >= 1):
             raise ValueError("ilc: need gain > 0, q_sigma >= 0, 0 < g_min <= 1, k_max >= 1")
+
+
+@dataclass(frozen=True)
+class ILCColumns:
+    """The ILC columns of ``pathrl-industrial table2``: ``columns`` "auto" (with ``controller.model=abb`` only, so
+    the shipped ``lag`` tables stay as they are), "always" or "never"; the P-type and filtered gains (as tuned on
+    training curves in ``results/industrial_abb_ilc.md``: 1.5 and 1) and the updates per row."""
+
+    columns: str = "auto"
+    gain_p: float = 1.5
+    gain_filtered: float = 1.0
+    k_max: int = 10
+
+    def __post_init__(self) -> None:
+        if self.columns not in ("auto", "always", "never"):
+            raise ValueError(f"ilc.columns must be auto, always or never, got {self.columns!r}")
+        if not (self.gain_p > 0 and self.gain_filtered > 0 and self.k_max >= 1):
+            raise ValueError("ilc: need gain_p > 0, gain_filtered > 0, k_max >= 1")
+
+    def variants(self, model: str) -> dict[str, ILCParams]:
+        """Column name -> ILC settings for a controller `model` ("lag" or "abb"); empty when the columns are off."""
+        if self.columns == "never" or (self.columns == "auto" and model != "abb"):
+            return {}
+        return {"ILC P": ILCParams("p", self.gain_p, k_max=self.k_max),
+                "ILC filtered": ILCParams("filtered", self.gain_filtered, k_max=self.k_max)}
 
 
 def _q_filter(x: np.ndarray, sigma: float) -> np.ndarray:

@@ -25,7 +25,9 @@ interpolation rate, the way an industrial path planner does it, instruction by i
    joint setpoints q(s(t)), moving-averaged over ``joint_fir_s`` seconds (the interpolator's joint-space
    smoothing: it leaves lines alone and cuts a curve of curvature kappa by about v^2 kappa T^2 / 24, a
    speed-dependent cut that reaches the tool orientation too), with their first and second time derivatives
-   (finite differences).
+   (finite differences). The window shrinks at the motion's start and stop (``joint_fir_ends="shrink"``: it
+   never averages the rest before the start in, so the start ramp is the time law's, not 0.18 s of smoothing;
+   "hold" pads with the rest position, the first calibration's behaviour).
 """
 
 from __future__ import annotations
@@ -38,7 +40,8 @@ from scipy.spatial.transform import Rotation
 from pathrl.industrial import arm
 from pathrl.industrial.program import DEFAULT_SEED, Program, blend_polyline
 
-__all__ = ["CornerEvent", "Plan", "PlannerParams", "blend_orientations", "lookahead", "moving_average", "plan",
+__all__ = ["CornerEvent", "Plan", "PlannerParams", "blend_orientations", "lookahead", "moving_average",
+           "moving_average_in_motion", "plan",
            "plan_zones", "speed_profile"]
 
 DEG = np.pi / 180.0
@@ -56,9 +59,10 @@ class PlannerParams:
     corner_s: float = 0.06  # s, longest time spent in a corner (speed-dependent zone use)
     ori_zone_factor: float = 1.5  # orientation zone / position zone (ABB's z10 has 15 mm for the orientation)
     tcp_acc: float = 4000.0  # mm/s^2, path acceleration (tangential and centripetal)
-    beta: float = 0.2  # share of the axis acceleration budget for the tangential part
-    fir_s: float = 0.032  # s, moving average of s(t)
+    beta: float = 0.3  # share of the axis acceleration budget for the tangential part (calibrated)
+    fir_s: float = 0.048  # s, moving average of s(t) (calibrated: with beta, the start ramp)
     joint_fir_s: float = 0.18  # s, moving average of the joint setpoints (cuts curves by ~ v^2 kappa T^2 / 24)
+    joint_fir_ends: str = "shrink"  # at the motion's start / stop: "shrink" the window, or "hold" (pad with rest)
     vel_limits: list[float] = field(default_factory=lambda: [100.0, 90.0, 90.0, 190.0, 140.0, 190.0])  # deg/s
     acc_limits: list[float] = field(default_factory=lambda: [7.6, 5.0, 10.3, 42.5, 36.8, 50.5])  # rad/s^2
 
@@ -68,6 +72,8 @@ class PlannerParams:
                 raise ValueError(f"planner.{key} must be > 0, got {getattr(self, key)}")
         if self.lookahead < 1 or min(self.prep_s, self.fir_s, self.joint_fir_s) < 0 or not 0 < self.beta < 1:
             raise ValueError("planner: need lookahead >= 1, prep_s, fir_s, joint_fir_s >= 0, 0 < beta < 1")
+        if self.joint_fir_ends not in ("shrink", "hold"):
+            raise ValueError(f"planner.joint_fir_ends must be shrink or hold, got {self.joint_fir_ends!r}")
         if len(self.vel_limits) != 6 or len(self.acc_limits) != 6:
             raise ValueError("planner: vel_limits and acc_limits need 6 values (axes 1-6)")
 
@@ -219,9 +225,39 @@ def moving_average(x: np.ndarray, n: int) -> np.ndarray:
     return (c[n:] - c[:-n]) / n
 
 
+def moving_average_in_motion(x: np.ndarray, n: int, first: int, last: int) -> np.ndarray:
+    """Centred moving average of about n samples (the odd window 2 ((n - 1) // 2) + 1) along axis 0 of x (N, ...)
+    whose half-width shrinks near samples `first` and `last` (the motion's start and stop) so that it never
+    averages the rest before `first` or after `last` in; x is kept outside [first, last]."""
+    half = (n - 1) // 2
+    if half < 1 or last - first < 2:
+        return x
+    i = np.arange(first, last + 1)
+    h = np.minimum(half, np.minimum(i - first, last - i))
+    c = np.cumsum(np.concatenate([np.zeros_like(x[:1]), x]), axis=0)
+    out = x.copy()
+    out[first:last + 1] = (c[i + h + 1] - c[i - h]) / (2 * h + 1).reshape(-1, *([1] * (x.ndim - 1)))
+    return out
+
+
+def _joint_smoothing(qt: np.ndarray, st: np.ndarray, params: PlannerParams, rate: float) -> np.ndarray:
+    """The joint setpoints (n, 6) moving-averaged over joint_fir_s, the window's ends per joint_fir_ends."""
+    n = int(round(params.joint_fir_s * rate))
+    if params.joint_fir_ends == "hold":
+        return moving_average(qt, n)
+    moving = np.nonzero(st != st[0])[0]
+    if len(moving) == 0:
+        return qt
+    first, last = int(moving[0]) - 1, int(np.nonzero(st != st[-1])[0][-1]) + 1
+    return moving_average_in_motion(qt, n, max(first, 0), min(last, len(st) - 1))
+
+
 def _time_law(s: np.ndarray, sdot: np.ndarray, params: PlannerParams, rate: float) -> np.ndarray:
-    """s(t) (n,) at `rate` Hz, moving-averaged over fir_s."""
-    dt = 2.0 * np.diff(s) / np.maximum(sdot[:-1] + sdot[1:], 1e-9)
+    """s(t) (n,) at `rate` Hz, moving-averaged over fir_s. Between two samples both at rest (two fine points
+    closer than the path sampling, e.g. waypoints moved next to each other) the move takes 2 sqrt(ds / tcp_acc),
+    rest to rest at the TCP acceleration, instead of ds / 0."""
+    ds, both = np.diff(s), sdot[:-1] + sdot[1:]
+    dt = np.where(both > 1e-6, 2.0 * ds / np.maximum(both, 1e-6), 2.0 * np.sqrt(ds / params.tcp_acc))
     t = np.r_[0.0, np.cumsum(dt)]
     grid = np.arange(0.0, t[-1] + 1.0 / rate, 1.0 / rate)
     st = np.interp(grid, t, s)
@@ -256,7 +292,7 @@ def plan(program: Program, v: float, params: PlannerParams | None = None, tool: 
     st = _time_law(s, sdot, params, rate)
     st = np.r_[st, np.full(int(round(settle_s * rate)), st[-1])]
     qt = np.stack([np.interp(st, s, q[:, j]) for j in range(6)], axis=1)
-    qt = moving_average(qt, int(round(params.joint_fir_s * rate)))
+    qt = _joint_smoothing(qt, st, params, rate)
     dt = 1.0 / rate
     qd = np.gradient(qt, dt, axis=0)
     qdd = np.gradient(qd, dt, axis=0)

@@ -5,7 +5,9 @@ weights from the ``priority_weight`` key; ``SoftUpdate`` for the target networks
 ``MLP`` s with tanh activations (the paper's choice against outliers) and a tanh output. Prioritized replay is
 :class:`pathrl.industrial.per.PrioritizedBuffer` (torchrl's needs its C++ extension, which does not load with
 torch 2.13). The policy maps one waypoint's 313 features to its 3 actions; all waypoints of a profile are
-one batch. Ablations zero feature groups (``ablate``: ``p_target``, ``q_fjac``, ``e``) and turn PER off
+one batch. ``critic_action_gain`` scales the critic's action input: with 313 features of magnitude 1-10
+against 3 actions in [-1, 1] the default-initialised critic is linear in the action (measured on the calibrated
+model, docs/industrial.md), so it cannot represent an optimum inside the clip. Ablations zero feature groups (``ablate``: ``p_target``, ``q_fjac``, ``e``) and turn PER off
 (``per_alpha = 0``).
 """
 
@@ -44,7 +46,9 @@ class RLParams:
     updates_per_iter: int = 2
     policy_delay: int = 2
     expl_noise: float = 0.2
+    expl_smooth: float = 0.0  # waypoints: Gaussian width of the exploration noise's correlation along the path
     policy_noise: float = 0.2
+    critic_action_gain: float = 1.0  # the critic's action input x this (1 = plain concatenation; module doc)
     noise_clip: float = 0.5
     warmup: int = 30
     buffer: int = 60000
@@ -65,6 +69,8 @@ class RLParams:
             raise ValueError(f"rl.ablate: unknown {bad[0]!r}; known: {', '.join(ABLATIONS)}")
         if not (0.0 < self.action_clip <= 2.0 and self.w_ori >= 0.0 and 0.0 < self.success_decay <= 1.0):
             raise ValueError("rl: need 0 < action_clip <= 2, w_ori >= 0, 0 < success_decay <= 1")
+        if self.expl_smooth < 0.0 or self.expl_noise < 0.0 or self.critic_action_gain <= 0.0:
+            raise ValueError("rl: need expl_noise >= 0, expl_smooth >= 0 (waypoints), critic_action_gain > 0")
         if self.iterations < 1 or self.k_max < 1 or self.batch < 1 or self.n_train < 1 or not self.hidden:
             raise ValueError("rl: iterations, k_max, batch, n_train must be >= 1 and hidden non-empty")
 
@@ -93,7 +99,7 @@ class TD3Agent:
         actor_net = nn.Sequential(MLP(in_features=N_FEATURES, out_features=N_ACTIONS, num_cells=params.hidden,
                                       activation_class=nn.Tanh), nn.Tanh())
         self.actor = TensorDictModule(actor_net, in_keys=["observation"], out_keys=["action"])
-        qvalue = ValueOperator(_Critic(params.hidden), in_keys=["observation", "action"])
+        qvalue = ValueOperator(_Critic(params.hidden, params.critic_action_gain), in_keys=["observation", "action"])
         td0 = TensorDict({"observation": torch.zeros(2, N_FEATURES)}, [2])
         qvalue(self.actor(td0))
         self.loss = TD3Loss(self.actor, qvalue, action_spec=Bounded(-1.0, 1.0, shape=(N_ACTIONS,)),
@@ -149,15 +155,18 @@ class TD3Agent:
 
 
 class _Critic(nn.Module):
-    def __init__(self, hidden: list[int]) -> None:
+    """Q(s, a): a tanh MLP of the features and `action_gain` x the action (module doc)."""
+
+    def __init__(self, hidden: list[int], action_gain: float = 1.0) -> None:
         from torchrl.modules import MLP
 
         super().__init__()
+        self.action_gain = float(action_gain)
         self.net = MLP(in_features=N_FEATURES + N_ACTIONS, out_features=1, num_cells=hidden,
                        activation_class=nn.Tanh)
 
     def forward(self, obs: torch.Tensor, act: torch.Tensor) -> torch.Tensor:
-        return self.net(torch.cat([obs, act], -1))
+        return self.net(torch.cat([obs, self.action_gain * act], -1))
 
 
 def run_policy_iwa(env: IWAEpisode, policy) -> IWAResult:

@@ -3,7 +3,8 @@
 Training set: ``n_train`` random type-1 trajectories (:func:`pathrl.industrial.trajectories.type1_random`,
 seeds ``1000 * (seed + 1) + i``) in the three poses (pose 1 + i mod 3) at the poses' speed commands (250, 400,
 400 mm/s, as in the evaluation). Each iteration: actions for all m waypoints (random during ``warmup``, then
-the policy plus Gaussian noise ``expl_noise``), one execution, m transitions into the prioritized buffer,
+the policy plus Gaussian noise ``expl_noise``, correlated along the path over ``expl_smooth`` waypoints
+if > 0), one execution, m transitions into the prioritized buffer,
 ``updates_per_iter`` TD3 updates; a global termination starts a new episode on a random training trajectory.
 
 Run directory: ``model_<K>.pt`` checkpoints (pathrl.storage: atomic, digest-verified, weights only) every
@@ -32,7 +33,8 @@ from pathrl.logging.mcap_io import McapJsonWriter
 from pathrl.logging.schema import RUN_CONFIG, TRAIN_SCALARS
 from pathrl.storage import clean_leftovers, latest_valid_checkpoint, load_checkpoint, save_checkpoint
 
-__all__ = ["ACTOR_PREFIX", "POSE_SPEEDS", "load_agent", "ship_policy", "train", "training_target"]
+__all__ = ["ACTOR_PREFIX", "POSE_SPEEDS", "actor_stats", "load_agent", "path_noise", "ship_policy", "train",
+           "training_target"]
 
 #: Speed command (mm/s) of the training trajectories per pose.
 POSE_SPEEDS = {1: 250.0, 2: 400.0, 3: 400.0}
@@ -82,10 +84,32 @@ def load_agent(run_dir: Path, params: RLParams | None = None) -> tuple[TD3Agent,
     return agent, int(state["iteration"])
 
 
-def _explore(agent: TD3Agent, obs: np.ndarray, it: int, params: RLParams, rng: np.random.Generator) -> np.ndarray:
+def path_noise(rng: np.random.Generator, m: int, std: float, smooth: float) -> np.ndarray:
+    """Gaussian noise (m, 3) with std `std` at every waypoint, correlated along the path with a Gaussian of width
+    `smooth` waypoints (each waypoint's noise is a unit-norm weighted sum of white noise; 0 = independent)."""
+    white = rng.normal(0.0, std, (m, N_ACTIONS))
+    if smooth <= 0.0:
+        return white
+    idx = np.arange(m)
+    w = np.exp(-0.5 * ((idx[:, None] - idx[None, :]) / smooth) ** 2)
+    return (w / np.linalg.norm(w, axis=1, keepdims=True)) @ white
+
+
+def _explore(agent: TD3Agent, obs: np.ndarray, it: int, params: RLParams,
+             rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """(exploration actions (m, 3) in [-1, 1], the deterministic actor's (m, 3); zeros during warm-up)."""
     if it < params.warmup:
-        return rng.uniform(-1.0, 1.0, (len(obs), N_ACTIONS))
-    return np.clip(agent.act(obs) + rng.normal(0.0, params.expl_noise, (len(obs), N_ACTIONS)), -1.0, 1.0)
+        return rng.uniform(-1.0, 1.0, (len(obs), N_ACTIONS)), np.zeros((len(obs), N_ACTIONS))
+    mean = agent.act(obs)
+    return np.clip(mean + path_noise(rng, len(obs), params.expl_noise, params.expl_smooth), -1.0, 1.0), mean
+
+
+def actor_stats(mean: np.ndarray, clip: float) -> dict[str, float]:
+    """Mean actions a1-a3 (in action units: `clip` x the tanh output) and the share of tanh outputs beyond 0.95
+    (at the clip) of the deterministic actor's actions `mean` (m, 3)."""
+    out = {f"a{j + 1}": float(clip * mean[:, j].mean()) for j in range(N_ACTIONS)}
+    out["at_clip"] = float((np.abs(mean) > 0.95).mean())
+    return out
 
 
 def train(run_dir: Path, params: RLParams, controller: ControllerParams, m: int = 100, zone: float = 10.0,
@@ -106,7 +130,8 @@ def train(run_dir: Path, params: RLParams, controller: ControllerParams, m: int 
         start = int(state["iteration"])
         rng.bit_generator.state = state["np_rng"]
     t0 = time.perf_counter()
-    episodes, env, obs, log = 0, None, None, {"reward": [], "err": [], "loss_q": [], "loss_actor": []}
+    log: dict[str, list[float]] = {k: [] for k in ("reward", "err", "loss_q", "loss_actor", "a1", "a2", "a3", "at_clip")}
+    episodes, env, obs = 0, None, None
     with McapJsonWriter(run_dir / f"train_{start:06d}.mcap") as writer:
         writer.write(RUN_CONFIG, {"config": config or {}, "params": asdict(params), "resumed_from": start})
         for it in range(start, params.iterations):
@@ -115,7 +140,10 @@ def train(run_dir: Path, params: RLParams, controller: ControllerParams, m: int 
                 settings = IWASettings(m, zone, params.k_max, 2.0, params.w_ori, params.success_decay)
                 env = IWAEpisode(target, target.speed, controller, settings)
                 obs, episodes = env.reset(), episodes + 1
-            action = _explore(agent, obs, it, params, rng)
+            action, mean = _explore(agent, obs, it, params, rng)
+            if it >= params.warmup:
+                for k, v in actor_stats(mean, params.action_clip).items():
+                    log[k].append(v)
             res = env.step(params.action_clip * action)
             buffer.add(torch.as_tensor(obs), torch.as_tensor(action), torch.as_tensor(res.reward),
                        torch.as_tensor(res.obs), torch.as_tensor(res.done))

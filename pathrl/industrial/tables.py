@@ -16,8 +16,8 @@ from dataclasses import dataclass
 from pathrl.config.paper import load as load_paper
 
 __all__ = [
-    "PAPER_RL", "PAPER_TABLE2", "PAPER_TABLE3", "PAPER_TABLE4", "Table2Row", "Table3Row", "ratios", "table2_markdown",
-    "table3_markdown", "table4_markdown",
+    "PAPER_RL", "PAPER_TABLE2", "PAPER_TABLE3", "PAPER_TABLE4", "Table2Row", "Table3Row", "ilc_summary", "per_row_ratio",
+    "ratios", "table2_markdown", "table3_markdown", "table4_markdown",
 ]
 
 _PAPER = load_paper("industrial")
@@ -41,7 +41,7 @@ def _paper_reached(itrs: Sequence[int | None]) -> str:
 @dataclass(frozen=True)
 class Table2Row:
     """Our measurement of one evaluation trajectory: baseline and MPGD error (mm), iterations to 0.5 mm (None
-    = not reached), MPGD wall time (s) and executions."""
+    = not reached), MPGD wall time (s) and executions; the policy's and each ILC variant's where measured."""
 
     name: str
     pose: int
@@ -54,6 +54,7 @@ class Table2Row:
     rl_mm: float | None = None
     rl_itr: int | None = None
     rl_t: float | None = None
+    ilc: tuple[tuple[str, float, int | None], ...] = ()  # (column name, best error mm, iterations) per ILC variant
 
 
 @dataclass(frozen=True)
@@ -98,11 +99,13 @@ def _ratio(rows: Sequence[Table2Row]) -> str:
 def table2_markdown(rows: Sequence[Table2Row], command: str, note: str = "", policy_name: str = "RL") -> str:
     """Table II (baseline, MPGD and, if measured, RL columns) with the paper's simulation values beside ours."""
     has_rl = any(r.rl_mm is not None for r in rows)
+    ilc_names = [name for name, _, _ in rows[0].ilc] if rows else []
     cols = ["Traj.", "Pose", "Speed cmd (mm/s)", "Baseline err. (mm)", "paper (sim/real)", "MPGD err. (mm)", "paper",
             "MPGD itr.", "paper", "MPGD t_opt (s)", "paper", "executions"]
     if has_rl:
         cols += [f"{policy_name} err. (mm)", "paper RL", f"{policy_name} itr.", "paper RL", f"{policy_name} t_opt (s)",
                  "paper RL"]
+    cols += [c for name in ilc_names for c in (f"{name} err. (mm)", f"{name} itr.")]
     lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
     for r in rows:
         p, q = PAPER_TABLE2.get(r.name), PAPER_RL.get(r.name)
@@ -112,6 +115,7 @@ def table2_markdown(rows: Sequence[Table2Row], command: str, note: str = "", pol
         if has_rl:
             cells += [_f(r.rl_mm, ".2f"), _f(q[0], ".2f") if q else "-", _f(r.rl_itr, "d"), _f(q[1], "d") if q else "-",
                       _f(r.rl_t, ".2f"), _f(q[2], ".2f") if q else "-"]
+        cells += [c for _, mm, itr in r.ilc for c in (f"{mm:.2f}", _f(itr, "d"))]
         lines.append("| " + " | ".join(cells) + " |")
     reached = sum(r.mpgd_itr is not None for r in rows)
     itrs = [r.mpgd_itr for r in rows if r.mpgd_itr is not None]
@@ -124,13 +128,42 @@ def table2_markdown(rows: Sequence[Table2Row], command: str, note: str = "", pol
                        + (f", mean {sum(rl_itrs) / len(rl_itrs):.1f} iterations" if rl_itrs else "")
                        + f"; the paper's RL: {_paper_reached([q[1] for q in PAPER_RL.values()])}. " + _ratio(rows)
                        + ".")
+    summary += [ilc_summary(rows, j, policy_name if has_rl else None) for j in range(len(ilc_names))]
     title = "# Industrial motion-profile optimisation: Table II (Baseline, MPGD" + (
-        f", {policy_name})" if has_rl else ")")
+        f", {policy_name}" if has_rl else "") + "".join(f", {n}" for n in ilc_names) + ")"
     text = [title, "",
             f"Measured with `{command}`.", "", *lines, "", *summary, ""]
     if note:
         text += [note, ""]
     return "\n".join(text)
+
+
+def per_row_ratio(a: Sequence[int | None], b: Sequence[int | None]) -> tuple[int, float, float] | None:
+    """(rows where both counts are known, mean of the per-row ratios a_i / b_i, ratio of the totals); counts of 0
+    iterations count as 1; None if no row has both."""
+    pairs = [(max(x, 1), max(y, 1)) for x, y in zip(a, b, strict=True) if x is not None and y is not None]
+    if not pairs:
+        return None
+    return (len(pairs), sum(x / y for x, y in pairs) / len(pairs),
+            sum(x for x, _ in pairs) / sum(y for _, y in pairs))
+
+
+def ilc_summary(rows: Sequence[Table2Row], j: int, policy_name: str | None = None) -> str:
+    """One sentence on ILC variant j of the rows: rows at 0.5 mm, mean iterations, and MPGD (and the policy, if
+    `policy_name`) over it in iterations on the rows both reach (mean of per-row ratios; ratio of totals)."""
+    name = rows[0].ilc[j][0]
+    itrs = [r.ilc[j][2] for r in rows]
+    got = [i for i in itrs if i is not None]
+    text = f"{name} reached 0.5 mm on {len(got)}/{len(rows)}" + (
+        f", mean {sum(got) / len(got):.1f} iterations" if got else "")
+    others = [("MPGD", [r.mpgd_itr for r in rows])]
+    if policy_name is not None:
+        others.append((policy_name, [r.rl_itr for r in rows]))
+    for other, counts in others:
+        rat = per_row_ratio(counts, itrs)
+        text += (f"; {other} / {name} iterations on the {rat[0]} rows both reach: {rat[1]:.2f}x (mean of per-row "
+                 f"ratios; totals {rat[2]:.2f}x)" if rat else f"; no row reached by both {other} and {name}")
+    return text + "."
 
 
 def table3_markdown(rows: Sequence[Table3Row], command: str, note: str = "", iwa_name: str = "MPGD") -> str:

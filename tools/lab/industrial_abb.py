@@ -3,9 +3,10 @@
     .venv/bin/python tools/lab/industrial_abb.py calibrate   # -> results/industrial_abb_calibration.md
     .venv/bin/python tools/lab/industrial_abb.py ilc         # -> results/industrial_abb_ilc.md
     .venv/bin/python tools/lab/industrial_abb.py mpgd_gain   # -> results/industrial_abb_mpgd_gain.md
-    .venv/bin/python tools/lab/industrial_abb.py table2 RUN_DIR   # -> results/industrial_abb_table2.md
+    .venv/bin/python tools/lab/industrial_abb.py table2 RUN_DIR [OUT.md]  # -> results/industrial_abb_table2.md
+    .venv/bin/python tools/lab/industrial_abb.py critic RUN_DIR/model_K.pt  # the critic vs the one-step reward
 
-``table2`` runs MPGD, both ILC variants (their gains as tuned by ``ilc``: 1 and 1) and the policy of RUN_DIR
+``table2`` runs MPGD, both ILC variants (``ILCColumns``: the gains as tuned by ``ilc``, 1.5 and 1) and the policy of RUN_DIR
 on the nine rows and reports executions per row, ratios as means of per-row ratios with totals beside, t_opt
 measured and under the paper's cost model, and the distribution of the policy's first actions a1-a3.
 
@@ -109,7 +110,7 @@ def table2(run_dir: str) -> str:
 
     from pathrl.industrial.controller import ControllerParams
     from pathrl.industrial.experiments import select_targets
-    from pathrl.industrial.ilc import ILCParams, run_ilc
+    from pathrl.industrial.ilc import ILCColumns, run_ilc
     from pathrl.industrial.iwa_env import IWAEpisode, IWASettings
     from pathrl.industrial.mpgd import run_mpgd
     from pathrl.industrial.rl import run_policy_iwa
@@ -131,9 +132,8 @@ def table2(run_dir: str) -> str:
     first_actions, lines = [], []
     for t in select_targets([]):
         prog = baseline_program(t)
-        res = {"MPGD": run_mpgd(t, prog, t.speed, None, ctrl),
-               "ILC P": run_ilc(t, prog, t.speed, ILCParams("p", 1.0), ctrl),
-               "ILC filtered": run_ilc(t, prog, t.speed, ILCParams("filtered", 1.0), ctrl)}
+        res = {"MPGD": run_mpgd(t, prog, t.speed, None, ctrl)}
+        res.update({name: run_ilc(t, prog, t.speed, p, ctrl) for name, p in ILCColumns().variants("abb").items()})
         env = IWAEpisode(t, t.speed, ctrl, IWASettings(100, 10.0, 10, 2.0))
         res["RL"] = run_policy_iwa(env, policy)
         first_actions.append(policy(IWAEpisode(t, t.speed, ctrl).reset()))
@@ -198,15 +198,73 @@ def mpgd_gain() -> str:
             f"({time.perf_counter() - t0:.0f} s)\n")
 
 
+def critic(ckpt: str) -> str:
+    """The critic of a training checkpoint against the measured one-step reward (markdown): on the baseline states
+    of 6 training curves, Q1(s, (a1, 0, 0)) and the mean reward of one execution with every waypoint at
+    a = clip x (a1, 0, 0), for tanh outputs a1 in 0, 0.25, ..., 1."""
+    import numpy as np
+    import torch
+    from tensordict import TensorDict
+
+    from pathrl.industrial.controller import ControllerParams
+    from pathrl.industrial.iwa_env import IWAEpisode, IWASettings
+    from pathrl.industrial.rl import RLParams, TD3Agent
+    from pathrl.industrial.rl_train import training_target
+    from pathrl.storage import load_checkpoint
+
+    state = load_checkpoint(Path(ckpt))
+    params = RLParams(**state["params"])
+    agent = TD3Agent(params)
+    agent.load_state_dict(state["agent"])
+    ctrl, grid = ControllerParams(model="abb"), (0.0, 0.25, 0.5, 0.75, 1.0)
+    settings = IWASettings(100, 10.0, params.k_max, params.action_clip, params.w_ori, params.success_decay)
+    loss = agent.loss
+
+    def q1(obs: np.ndarray, a: np.ndarray) -> float:
+        td = TensorDict({"observation": torch.as_tensor(obs, dtype=torch.float32) * agent.mask,
+                         "action": torch.as_tensor(a, dtype=torch.float32)}, [len(obs)])
+        with torch.no_grad(), loss.qvalue_network_params[0].to_module(loss.qvalue_network):
+            return float(loss.qvalue_network(td)["state_action_value"].mean())
+
+    out = [f"# Critic of {ckpt} (iteration {state['iteration']}) against the measured one-step reward", "",
+           f"`python tools/lab/industrial_abb.py critic {ckpt}`: baseline states of training curves 0-5 (seed "
+           f"{params.seed}); every waypoint at tanh output (a1, 0, 0), i.e. the action {params.action_clip:g} x that.",
+           "", "| curve | baseline (mm) | " + " | ".join(f"Q(a1={g:g})" for g in grid) + " | "
+           + " | ".join(f"r(a1={g:g})" for g in grid) + " | actor a1 (action units) |", "|" + "---|" * 13]
+    for i in range(6):
+        t = training_target(i, params.seed)
+        obs = IWAEpisode(t, t.speed, ctrl, settings).reset()
+        qs, rs = [], []
+        for g in grid:
+            a = np.tile([g, 0.0, 0.0], (len(obs), 1))
+            qs.append(q1(obs, a))
+            env = IWAEpisode(t, t.speed, ctrl, settings)
+            env.reset()
+            rs.append(float(env.step(params.action_clip * a).reward.mean()))
+        a1 = params.action_clip * agent.act(obs)[:, 0].mean()
+        out.append(f"| train{i} | {float(env.pos0.max()):.2f} | "
+                   + " | ".join(f"{x:.2f}" for x in qs) + " | " + " | ".join(f"{x:.2f}" for x in rs)
+                   + f" | {a1:.2f} |")
+    return "\n".join(out + [""])
+
+
 def main() -> None:
     what = sys.argv[1] if len(sys.argv) > 1 else ""
-    if what not in ("calibrate", "ilc", "mpgd_gain", "table2") or (what == "table2" and len(sys.argv) < 3):
-        raise SystemExit("usage: tools/lab/industrial_abb.py {calibrate,ilc,mpgd_gain,table2 RUN_DIR}")
-    run = {"calibrate": calibrate, "ilc": ilc, "mpgd_gain": mpgd_gain, "table2": lambda: table2(sys.argv[2])}
+    if what not in ("calibrate", "ilc", "mpgd_gain", "table2", "critic") or (what in ("table2", "critic")
+                                                                            and len(sys.argv) < 3):
+        raise SystemExit("usage: tools/lab/industrial_abb.py {calibrate,ilc,mpgd_gain,table2 RUN_DIR [OUT.md],"
+                         "critic CHECKPOINT}")
+    from pathrl.storage import atomic_write
+
+    run = {"calibrate": calibrate, "ilc": ilc, "mpgd_gain": mpgd_gain, "table2": lambda: table2(sys.argv[2]),
+           "critic": lambda: critic(sys.argv[2])}
     text = run[what]()
+    if what == "critic":  # a diagnosis: printed, not written
+        print(text)
+        return
     name = {"calibrate": "calibration", "ilc": "ilc", "mpgd_gain": "mpgd_gain", "table2": "table2"}[what]
-    path = ROOT / "results" / f"industrial_abb_{name}.md"
-    path.write_text(text)
+    path = Path(sys.argv[3]) if what == "table2" and len(sys.argv) > 3 else ROOT / "results" / f"industrial_abb_{name}.md"
+    atomic_write(path, text)
     print(text)
 
 
