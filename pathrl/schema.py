@@ -21,9 +21,9 @@ from pathrl.envs.path_change_cfg import PathChangeCfg
 from pathrl.envs.tracking_cfg import EnvSettings
 
 __all__ = [
-    "BallCurriculumCfg", "CriticWarmupCfg", "DatasetAppCfg", "DatasetCfg", "EvalAppCfg", "EvalDatasetCfg", "ExportAppCfg",
-    "ExportDatasetCfg", "KnotsCfg", "LrDecayCfg", "RewardCfg", "RobotCfg", "StdAnnealCfg", "TaskCfg", "TcpCfg",
-    "ToppraAppCfg", "TrainAppCfg", "WorkspaceCfg", "config_dict", "train_app_cfg",
+    "BallCurriculumCfg", "CriticWarmupCfg", "DatasetAppCfg", "DatasetCfg", "EvalAppCfg", "EvalDatasetCfg",
+    "ExportAppCfg", "ExportDatasetCfg", "KnotsCfg", "LrDecayCfg", "RewardCfg", "RobotCfg", "StdAnnealCfg", "TaskCfg",
+    "TcpCfg", "ToppraAppCfg", "TrainAppCfg", "WorkspaceCfg", "config_dict", "train_app_cfg",
 ]
 
 
