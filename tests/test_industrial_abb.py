@@ -154,7 +154,7 @@ def test_ilc_columns_follow_the_controller_model():
 
     assert ILCColumns().variants("lag") == {}
     both = ILCColumns().variants("abb")
-    assert list(both) == ["ILC P", "ILC filtered"] and both["ILC P"].kind == "p" and both["ILC P"].gain == 1.5
+    assert list(both) == ["ILC P", "ILC filtered"] and both["ILC P"].kind == "p" and both["ILC P"].gain == 1.0
     assert list(ILCColumns(columns="always").variants("lag")) == ["ILC P", "ILC filtered"]
     assert ILCColumns(columns="never").variants("abb") == {}
     with pytest.raises(ValueError, match="ilc.columns"):

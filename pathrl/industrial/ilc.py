@@ -54,10 +54,10 @@ class ILCParams:
 class ILCColumns:
     """The ILC columns of ``pathrl-industrial table2``: ``columns`` "auto" (with ``controller.model=abb`` only, so
     the shipped ``lag`` tables stay as they are), "always" or "never"; the P-type and filtered gains (as tuned on
-    training curves in ``results/industrial_abb_ilc.md``: 1.5 and 1) and the updates per row."""
+    training curves in ``results/industrial_abb_ilc.md``: 1 and 1) and the updates per row."""
 
     columns: str = "auto"
-    gain_p: float = 1.5
+    gain_p: float = 1.0
     gain_filtered: float = 1.0
     k_max: int = 10
 

@@ -25,9 +25,11 @@ interpolation rate, the way an industrial path planner does it, instruction by i
    joint setpoints q(s(t)), moving-averaged over ``joint_fir_s`` seconds (the interpolator's joint-space
    smoothing: it leaves lines alone and cuts a curve of curvature kappa by about v^2 kappa T^2 / 24, a
    speed-dependent cut that reaches the tool orientation too), with their first and second time derivatives
-   (finite differences). The window shrinks at the motion's start and stop (``joint_fir_ends="shrink"``: it
-   never averages the rest before the start in, so the start ramp is the time law's, not 0.18 s of smoothing;
-   "hold" pads with the rest position, the first calibration's behaviour).
+   (finite differences). The window shrinks at the motion's start (``joint_fir_ends="start"``: it never
+   averages the rest before the start in, so the start ramp is the time law's, not 0.18 s of smoothing) and
+   runs over the held end point at the stop, so the stop is smoothed over the full window; "shrink" shrinks it
+   at the stop too (an abrupt stop that leaves ~1 mm of gear vibration at rest), "hold" pads both ends with
+   the rest position (the first calibration's behaviour).
 """
 
 from __future__ import annotations
@@ -62,7 +64,8 @@ class PlannerParams:
     beta: float = 0.3  # share of the axis acceleration budget for the tangential part (calibrated)
     fir_s: float = 0.048  # s, moving average of s(t) (calibrated: with beta, the start ramp)
     joint_fir_s: float = 0.18  # s, moving average of the joint setpoints (cuts curves by ~ v^2 kappa T^2 / 24)
-    joint_fir_ends: str = "shrink"  # at the motion's start / stop: "shrink" the window, or "hold" (pad with rest)
+    joint_fir_ends: str = "start"  # window at the motion's ends: "start" shrinks it at the start only, "shrink"
+    # at the start and the stop, "hold" at neither (pads with rest); "start" is calibrated (docs/industrial.md)
     vel_limits: list[float] = field(default_factory=lambda: [100.0, 90.0, 90.0, 190.0, 140.0, 190.0])  # deg/s
     acc_limits: list[float] = field(default_factory=lambda: [7.6, 5.0, 10.3, 42.5, 36.8, 50.5])  # rad/s^2
 
@@ -72,8 +75,8 @@ class PlannerParams:
                 raise ValueError(f"planner.{key} must be > 0, got {getattr(self, key)}")
         if self.lookahead < 1 or min(self.prep_s, self.fir_s, self.joint_fir_s) < 0 or not 0 < self.beta < 1:
             raise ValueError("planner: need lookahead >= 1, prep_s, fir_s, joint_fir_s >= 0, 0 < beta < 1")
-        if self.joint_fir_ends not in ("shrink", "hold"):
-            raise ValueError(f"planner.joint_fir_ends must be shrink or hold, got {self.joint_fir_ends!r}")
+        if self.joint_fir_ends not in ("shrink", "start", "hold"):
+            raise ValueError(f"planner.joint_fir_ends must be shrink, start or hold, got {self.joint_fir_ends!r}")
         if len(self.vel_limits) != 6 or len(self.acc_limits) != 6:
             raise ValueError("planner: vel_limits and acc_limits need 6 values (axes 1-6)")
 
@@ -225,19 +228,25 @@ def moving_average(x: np.ndarray, n: int) -> np.ndarray:
     return (c[n:] - c[:-n]) / n
 
 
-def moving_average_in_motion(x: np.ndarray, n: int, first: int, last: int) -> np.ndarray:
+def moving_average_in_motion(x: np.ndarray, n: int, first: int, last: int, shrink_stop: bool = True) -> np.ndarray:
     """Centred moving average of about n samples (the odd window 2 ((n - 1) // 2) + 1) along axis 0 of x (N, ...)
-    whose half-width shrinks near samples `first` and `last` (the motion's start and stop) so that it never
-    averages the rest before `first` or after `last` in; x is kept outside [first, last]."""
+    whose half-width shrinks near sample `first` (the motion's start) and, with `shrink_stop`, near `last` (its
+    stop) so that it never averages the rest there in; without it the window runs past `last` over x held at
+    x[last] (the stop is smoothed over the full window). x is kept before `first` (and after `last` if shrunk)."""
     half = (n - 1) // 2
     if half < 1 or last - first < 2:
         return x
+    if not shrink_stop:
+        x = np.concatenate([x[:last + 1], np.repeat(x[last:last + 1], max(len(x) - 1 - last, 0) + half, 0)])
+        last = len(x) - 1 - half
     i = np.arange(first, last + 1)
-    h = np.minimum(half, np.minimum(i - first, last - i))
+    h = np.minimum(half, i - first)
+    if shrink_stop:
+        h = np.minimum(h, last - i)
     c = np.cumsum(np.concatenate([np.zeros_like(x[:1]), x]), axis=0)
     out = x.copy()
     out[first:last + 1] = (c[i + h + 1] - c[i - h]) / (2 * h + 1).reshape(-1, *([1] * (x.ndim - 1)))
-    return out
+    return out if shrink_stop else out[:len(out) - half]
 
 
 def _joint_smoothing(qt: np.ndarray, st: np.ndarray, params: PlannerParams, rate: float) -> np.ndarray:
@@ -249,7 +258,7 @@ def _joint_smoothing(qt: np.ndarray, st: np.ndarray, params: PlannerParams, rate
     if len(moving) == 0:
         return qt
     first, last = int(moving[0]) - 1, int(np.nonzero(st != st[-1])[0][-1]) + 1
-    return moving_average_in_motion(qt, n, max(first, 0), min(last, len(st) - 1))
+    return moving_average_in_motion(qt, n, max(first, 0), min(last, len(st) - 1), params.joint_fir_ends == "shrink")
 
 
 def _time_law(s: np.ndarray, sdot: np.ndarray, params: PlannerParams, rate: float) -> np.ndarray:

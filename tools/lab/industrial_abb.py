@@ -6,7 +6,7 @@
     .venv/bin/python tools/lab/industrial_abb.py table2 RUN_DIR [OUT.md]  # -> results/industrial_abb_table2.md
     .venv/bin/python tools/lab/industrial_abb.py critic RUN_DIR/model_K.pt  # the critic vs the one-step reward
 
-``table2`` runs MPGD, both ILC variants (``ILCColumns``: the gains as tuned by ``ilc``, 1.5 and 1) and the policy of RUN_DIR
+``table2`` runs MPGD, both ILC variants (``ILCColumns``: the gains as tuned by ``ilc``, 1 and 1) and the policy of RUN_DIR
 on the nine rows and reports executions per row, ratios as means of per-row ratios with totals beside, t_opt
 measured and under the paper's cost model, and the distribution of the policy's first actions a1-a3.
 
