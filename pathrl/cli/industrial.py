@@ -11,6 +11,7 @@
                                                one row's optimisation, every execution -> DIR/industrial.mcap
                                                (``pathrl-view DIR`` shows it)
 
+``speed speed_ilc=p|filtered`` runs the bisection around that ILC variant instead of MPGD.
 ``table2 policy=RUN_DIR`` adds the learned IWA (the run's newest checkpoint) beside MPGD; ``speed policy=RUN_DIR``
 uses it as the inner loop instead of MPGD. ``policy=feedback:G`` is the fixed error-feedback policy a = (G, 0, 0).
 
@@ -149,8 +150,10 @@ def _main(argv: list[str]) -> None:
         elif cmd == "speed":
             policy, name = _policy(cfg.policy)
             iwa = IWASettings(cfg.waypoints, cfg.zone, k_max)
-            rows = experiments.run_speed(targets, controller, mpgd, cfg.search, iwa, cfg.seed, policy)
-            text = tables.table3_markdown(rows, command, note, name if policy is not None else "MPGD")
+            ilc = _speed_ilc(cfg)
+            rows = experiments.run_speed(targets, controller, mpgd, cfg.search, iwa, cfg.seed, policy, ilc)
+            name = name if policy is not None else ("MPGD" if ilc is None else f"ILC {cfg.speed_ilc}")
+            text = tables.table3_markdown(rows, command, note, name)
             out = cfg.out_speed
         elif cmd == "table4":
             text, out = _table4(cfg, targets, command, note), cfg.out_table4
@@ -168,6 +171,16 @@ def _main(argv: list[str]) -> None:
     print(text)
     _write(out, text)
     print(f"{cmd} took {time.perf_counter() - t0:.1f} s")
+
+
+def _speed_ilc(cfg: IndustrialAppCfg):
+    """The ILC settings of ``speed_ilc`` (gains and updates from the ``ilc`` keys), or None when it is empty."""
+    from pathrl.industrial.ilc import ILCParams
+
+    if not cfg.speed_ilc:
+        return None
+    gain = cfg.ilc.gain_p if cfg.speed_ilc == "p" else cfg.ilc.gain_filtered
+    return ILCParams(cfg.speed_ilc, gain, k_max=cfg.ilc.k_max)
 
 
 def _seed_summary(cfg: IndustrialAppCfg, targets, mpgd_rows) -> str:

@@ -26,7 +26,8 @@ settings, the training run directory, whether to resume it, and the run director
 ``table4_runs`` (``NAME=RUN_DIR[,RUN_DIR...]`` entries: several run dirs are seeds of one variant, summarised as
 mean and min-max); ``seed_runs`` are the run dirs of the seeds of the main configuration (``table2`` with a policy
 adds their per-seed summary, ``validate`` scores them on ``validation_n`` training-family curves drawn with
-``validation_seed``, :mod:`pathrl.industrial.seeds`); ``timing`` writes where t_opt goes to ``out_timing``."""
+``validation_seed``, :mod:`pathrl.industrial.seeds`); ``timing`` writes where t_opt goes to ``out_timing``;
+``speed_ilc`` ("p" or "filtered"; empty = off) makes ``speed``'s inner IWA that ILC variant (``ilc`` gains)."""
 
     controller: ControllerParams = field(default_factory=ControllerParams)
     mpgd: MPGDParams = field(default_factory=MPGDParams)
@@ -49,6 +50,7 @@ adds their per-seed summary, ``validate`` scores them on ``validation_n`` traini
     sweep_speeds: list[float] = field(default_factory=lambda: [250.0, 400.0, 700.0, 1100.0])
     out_table2: str = "results/industrial_table2.md"
     out_speed: str = "results/industrial_speed.md"
+    speed_ilc: str = ""
     out_sweep: str = "results/industrial_baseline_sweep.md"
     seed: int = 0
 
@@ -86,6 +88,10 @@ def check_app(cfg: dict[str, Any]) -> None:
         raise ValueError(f"waypoints must be >= 2, got {cfg['waypoints']}")
     if not cfg["zone"] >= 0:
         raise ValueError(f"zone must be >= 0 (mm), got {cfg['zone']}")
+    if cfg["speed_ilc"] not in ("", "p", "filtered"):
+        raise ValueError(f"speed_ilc must be empty, p or filtered, got {cfg['speed_ilc']!r}")
+    if cfg["speed_ilc"] and cfg["policy"]:
+        raise ValueError("speed: give either policy or speed_ilc, not both")
     if str(cfg["policy"]).startswith("feedback:"):
         feedback_gain(cfg["policy"])
 

@@ -11,13 +11,15 @@ from pathrl.industrial.controller import ControllerParams, execute
 from pathrl.industrial.ilc import ILCParams, run_ilc
 from pathrl.industrial.iwa_env import IWAEpisode, IWASettings
 from pathrl.industrial.metrics import evaluate
-from pathrl.industrial.mpgd import MPGDParams, run_mpgd
+from pathrl.industrial.mpgd import IWAResult, MPGDParams, run_mpgd
+from pathrl.industrial.program import Program
 from pathrl.industrial.rl import run_policy_iwa
 from pathrl.industrial.speed_search import SearchParams, bisection_search
 from pathrl.industrial.tables import Table2Row, Table3Row
 from pathrl.industrial.trajectories import EVALUATION, Target, baseline_program, evaluation_targets
 
-__all__ = ["baseline_sweep", "run_speed", "run_table2", "run_table4", "select_targets", "sweep_markdown"]
+__all__ = ["baseline_sweep", "run_speed", "run_table2", "run_table4", "select_targets", "speed_iwa",
+           "sweep_markdown"]
 
 
 def select_targets(rows: Sequence[str]) -> list[Target]:
@@ -55,25 +57,35 @@ def run_table2(targets: Sequence[Target], controller: ControllerParams, mpgd: MP
 
 def run_speed(targets: Sequence[Target], controller: ControllerParams, mpgd: MPGDParams, search: SearchParams,
               iwa: IWASettings | None = None, seed: int = 0,
-              policy: Callable[[np.ndarray], np.ndarray] | None = None) -> list[Table3Row]:
+              policy: Callable[[np.ndarray], np.ndarray] | None = None, ilc: ILCParams | None = None
+              ) -> list[Table3Row]:
     """IWA + bisection on the speed command (paper Alg. 1) for each target, from its speed command and the profile
     of ``iwa.m`` MoveL waypoints, zone ``iwa.zone`` (`iwa` default :class:`IWASettings`); the IWA is MPGD (seed
-    `seed`), or the `policy` (``iwa.k_max`` iterations) if given."""
+    `seed`), the `policy` (``iwa.k_max`` iterations) or the ILC `ilc` (seed `seed`) if given."""
     settings = iwa or IWASettings()
     rows = []
     for t in targets:
-        inner = None
-        if policy is not None:
-            def inner(prog, v, t=t):
-                return run_policy_iwa(IWAEpisode(t, v, controller, settings), policy)
         start = baseline_program(t, settings.m, settings.zone)
-        res = bisection_search(t, t.speed, search, mpgd, controller, seed, start, inner)
+        res = bisection_search(t, t.speed, search, mpgd, controller, seed, start,
+                               speed_iwa(t, controller, settings, seed, policy, ilc))
         if res.best is None:
             rows.append(Table3Row(t.name, None, float("nan"), float("nan"), float("nan"), res.t_total))
             continue
         e = res.best.errors
         rows.append(Table3Row(t.name, res.v, e.max_pos_mm, e.mean_speed, 100 * e.speed_std_ratio, res.t_total))
     return rows
+
+
+def speed_iwa(target: Target, controller: ControllerParams, settings: IWASettings, seed: int = 0,
+              policy: Callable[[np.ndarray], np.ndarray] | None = None, ilc: ILCParams | None = None
+              ) -> Callable[[Program, float], IWAResult] | None:
+    """The inner IWA ``(program, v) -> IWAResult`` of the speed search on `target`: the `policy`'s learned IWA,
+    else the ILC `ilc`, else None (the search's default, MPGD)."""
+    if policy is not None:
+        return lambda _prog, v: run_policy_iwa(IWAEpisode(target, v, controller, settings), policy)
+    if ilc is not None:
+        return lambda prog, v: run_ilc(target, prog, v, ilc, controller, seed)
+    return None
 
 
 def baseline_sweep(targets: Sequence[Target], speeds: Sequence[float], controller: ControllerParams,

@@ -4,6 +4,7 @@
     .venv/bin/python tools/lab/industrial_abb.py ilc         # -> results/industrial_abb_ilc.md
     .venv/bin/python tools/lab/industrial_abb.py mpgd_gain   # -> results/industrial_abb_mpgd_gain.md
     .venv/bin/python tools/lab/industrial_abb.py table2 RUN_DIR [OUT.md]  # -> results/industrial_abb_table2.md
+    .venv/bin/python tools/lab/industrial_abb.py table3 RUN_DIR  # -> results/industrial_abb_table3.md
     .venv/bin/python tools/lab/industrial_abb.py critic RUN_DIR/model_K.pt  # the critic vs the one-step reward
 
 ``table2`` runs MPGD, both ILC variants (``ILCColumns``: the gains as tuned by ``ilc``, 1 and 1) and the policy of RUN_DIR
@@ -177,6 +178,61 @@ def table2(run_dir: str) -> str:
     return "\n".join(out + [""])
 
 
+def _specs_cells(errs) -> str:
+    """Error (mm), orientation (deg), mean speed (mm/s), speed std (%) of one execution, a * on each missed spec."""
+    from pathrl.industrial.metrics import ORI_SPEC_DEG, POS_SPEC_MM, SPEED_STD_SPEC
+
+    def mark(bad: bool) -> str:
+        return "*" if bad else ""
+
+    return (f"{errs.max_pos_mm:.2f}{mark(errs.max_pos_mm > POS_SPEC_MM)} | {errs.max_ori_deg:.2f}"
+            f"{mark(errs.max_ori_deg > ORI_SPEC_DEG)} | {errs.mean_speed:.0f} | {100 * errs.speed_std_ratio:.1f}"
+            f"{mark(errs.speed_std_ratio > SPEED_STD_SPEC)}")
+
+
+def table3(run_dir: str) -> str:
+    """Table III on the calibrated model: per method (MPGD, both ILC variants, the policy of RUN_DIR) and row the
+    IWA at the row's command ("IWA only") and the bisection's fastest command meeting all three specs (markdown)."""
+    from pathrl.industrial.controller import ControllerParams
+    from pathrl.industrial.experiments import select_targets, speed_iwa
+    from pathrl.industrial.ilc import ILCColumns
+    from pathrl.industrial.iwa_env import IWASettings
+    from pathrl.industrial.rl_train import load_agent
+    from pathrl.industrial.speed_search import SearchParams, bisection_search
+    from pathrl.industrial.trajectories import baseline_program
+
+    ctrl, settings = ControllerParams(model="abb"), IWASettings(100, 10.0, 10, 2.0)
+    agent, it = load_agent(Path(run_dir))
+    clip = agent.params.action_clip
+    methods = {"MPGD": {}, **{n: {"ilc": p} for n, p in ILCColumns().variants("abb").items()},
+               "RL": {"policy": lambda obs: clip * agent.act(obs)}}
+    head = ("| method | Traj. | v cmd | IWA only: error (mm) | ori. (deg) | mean speed (mm/s) | speed std (%) | "
+            "bisection: v cmd (mm/s) | error (mm) | ori. (deg) | mean speed (mm/s) | speed std (%) | executions | "
+            "wall time (s) |")
+    out = ["# Table III on the calibrated model (controller.model=abb): IWA + bisection speed search", "",
+           f"`python tools/lab/industrial_abb.py table3 {run_dir}` (one core; policy iteration {it}, action clip "
+           f"{clip:g}; MPGD gain 0.5, k_max 50; ILC gains {ILCColumns().gain_p:g} (P) and "
+           f"{ILCColumns().gain_filtered:g} (filtered), k_max 10; RL k_max 10; bisection: 10 outer iterations "
+           "between 0.2 and 2 x the row's command). * = spec missed (0.5 mm, 3 deg, 5 %); N/A = no command met all "
+           "three.", "", head, "|" + "---|" * 14]
+    summary = []
+    for name, kw in methods.items():
+        t0, met, speeds = time.perf_counter(), 0, []
+        for t in select_targets([]):
+            inner = speed_iwa(t, ctrl, settings, 0, kw.get("policy"), kw.get("ilc"))
+            res = bisection_search(t, t.speed, SearchParams(), None, ctrl, 0, baseline_program(t), inner)
+            first = res.trials[0][2].errors
+            n_exec = sum(r.executions for _, _, r in res.trials)
+            best = "N/A | - | - | - | -" if res.best is None else f"{res.v:.0f} | {_specs_cells(res.best.errors)}"
+            met += res.best is not None
+            speeds += [] if res.best is None else [res.best.errors.mean_speed / first.mean_speed]
+            out.append(f"| {name} | {t.name} | {t.speed:.0f} | {_specs_cells(first)} | {best} | {n_exec} | "
+                       f"{res.t_total:.1f} |")
+        ratio = f", mean speed {sum(speeds) / len(speeds):.2f}x the IWA-only run's" if speeds else ""
+        summary.append(f"- {name}: all three specs met on {met}/9 rows{ratio} ({time.perf_counter() - t0:.0f} s)")
+    return "\n".join(out + ["", *summary, ""])
+
+
 def mpgd_gain() -> str:
     """MPGD's step gain tuned like the ILC gains: 6 training-family curves, fewest mean iterations (markdown)."""
     from pathrl.industrial.controller import ControllerParams
@@ -250,19 +306,21 @@ def critic(ckpt: str) -> str:
 
 def main() -> None:
     what = sys.argv[1] if len(sys.argv) > 1 else ""
-    if what not in ("calibrate", "ilc", "mpgd_gain", "table2", "critic") or (what in ("table2", "critic")
-                                                                            and len(sys.argv) < 3):
+    if what not in ("calibrate", "ilc", "mpgd_gain", "table2", "table3", "critic") or (
+            what in ("table2", "table3", "critic") and len(sys.argv) < 3):
         raise SystemExit("usage: tools/lab/industrial_abb.py {calibrate,ilc,mpgd_gain,table2 RUN_DIR [OUT.md],"
-                         "critic CHECKPOINT}")
+                         "table3 RUN_DIR,critic CHECKPOINT}")
     from pathrl.storage import atomic_write
 
     run = {"calibrate": calibrate, "ilc": ilc, "mpgd_gain": mpgd_gain, "table2": lambda: table2(sys.argv[2]),
+           "table3": lambda: table3(sys.argv[2]),
            "critic": lambda: critic(sys.argv[2])}
     text = run[what]()
     if what == "critic":  # a diagnosis: printed, not written
         print(text)
         return
-    name = {"calibrate": "calibration", "ilc": "ilc", "mpgd_gain": "mpgd_gain", "table2": "table2"}[what]
+    name = {"calibrate": "calibration", "ilc": "ilc", "mpgd_gain": "mpgd_gain", "table2": "table2",
+            "table3": "table3"}[what]
     path = Path(sys.argv[3]) if what == "table2" and len(sys.argv) > 3 else ROOT / "results" / f"industrial_abb_{name}.md"
     atomic_write(path, text)
     print(text)
