@@ -137,6 +137,7 @@ def _scratch_row(key: str, setting: str, variant: str) -> AdaptRow:
                     in_paper=False, paper_row=f"on_plate/{key}")
 
 
+_OPEN_LOOP_SCRATCH = "**PPO from scratch**, trained and evaluated with the ball measurement frozen"
 _TRAY = "**tray controller: privileged information, not in the paper**"
 
 ROWS: tuple[AdaptRow, ...] = (
@@ -163,6 +164,9 @@ ROWS: tuple[AdaptRow, ...] = (
     AdaptRow("on_plate/open_loop_training", "on plate: open loop, training and evaluation",
              _STUDENT + " trained with the ball measurement frozen (teacher too), evaluated so",
              AdaptEval("on_plate", "iiwa7_trueadapt_on_plate_distill_open_loop", open_loop=True)),
+    AdaptRow("on_plate/open_loop_training_scratch", "on plate: open loop, training and evaluation",
+             _OPEN_LOOP_SCRATCH, AdaptEval("on_plate", f"{SCRATCH}_open_loop", open_loop=True), in_paper=False,
+             paper_row="on_plate/open_loop_training"),
     _ablation_row("no_current_position", "current position", "no_position", "the commanded position"),
     _scratch_row("no_current_position", "state without current position", "no_position"),
     _ablation_row("no_current_velocity", "current velocity", "no_velocity", "the commanded velocity"),
@@ -174,6 +178,7 @@ ROWS: tuple[AdaptRow, ...] = (
     AdaptRow("on_plate/ten_following_positions", "on plate: state with ten following positions",
              _STUDENT + " with the next ten reference positions in its state",
              AdaptEval("on_plate", "iiwa7_trueadapt_on_plate_distill_f10")),
+    _scratch_row("ten_following_positions", "state with ten following positions", "f10"),
     AdaptRow("on_plate/no_jerk_penalty", "on plate: no jerk penalty", _PPO + " without the jerk penalty",
              AdaptEval("on_plate", PPO + "_no_jerk")),
     _scratch_row("no_jerk_penalty", "no jerk penalty", "no_jerk_penalty"),
@@ -202,6 +207,9 @@ ROWS: tuple[AdaptRow, ...] = (
     AdaptRow("in_place/open_loop_training", "in place: open loop, training and evaluation",
              _STUDENT_F10 + " trained with the ball measurement frozen (teacher too), evaluated so",
              AdaptEval("in_place", "iiwa7_trueadapt_in_place_distill_open_loop", open_loop=True)),
+    AdaptRow("in_place/open_loop_training_scratch", "in place: open loop, training and evaluation",
+             _OPEN_LOOP_SCRATCH, AdaptEval("in_place", f"{SCRATCH_IN_PLACE}_open_loop", open_loop=True),
+             in_paper=False, paper_row="in_place/open_loop_training"),
     AdaptRow("in_place/tray_controller", "in place: model-based tray controller", _TRAY,
              AdaptEval("in_place", "iiwa7_trueadapt_in_place_tray_controller"), in_paper=False),
 )
@@ -403,10 +411,10 @@ CAPTION = (
     "on-plate student's recipe with one part of its state left out; the teacher is the same controller, so these rows "
     "measure what the network needs in order to copy it, not what PPO needs to learn the task. *From-scratch "
     "ablations* (`models/trueadapt/iiwa7_trueadapt_on_plate_ppo_scratch_<variant>`): the paper's protocol for the same "
-    "question, the from-scratch recipe and budget with one part of the state or one penalty removed, seed 0 (every "
-    "seed below the table). *Trained by*: read from each shipped policy's config: PPO from scratch, PPO from "
-    "<model> (a warm start), DAgger from <teacher>, or not trained. Rows without a trained policy of ours show a "
-    "dash.")
+    "question, the from-scratch recipe and budget with one part of the state or one penalty removed, ten following "
+    "positions, or the ball frozen in training too (open loop), seed 0 (every seed below the table). *Trained by*: "
+    "read from each shipped policy's config: PPO from scratch, PPO from <model> (a warm start), DAgger from "
+    "<teacher>, or not trained. Rows without a trained policy of ours show a dash.")
 
 
 def method(results: dict[str, Any], row: AdaptRow) -> str:

@@ -1,6 +1,6 @@
-"""Which of the TrueAdapt paper's on-plate findings our rows reproduce: each ablation's value over its full policy's,
-classed the same way for the paper and for ours (trained from scratch, and from a teacher). Rendered under the
-TrueAdapt table (:mod:`pathrl.repro.trueadapt`) from the same results."""
+"""Which of the TrueAdapt paper's findings (on plate; in place, the open-loop rows) our rows reproduce: each
+ablation's value over its full policy's, classed the same way for the paper and for ours (trained from scratch, and
+from a teacher). Rendered under the TrueAdapt table (:mod:`pathrl.repro.trueadapt`) from the same results."""
 
 from __future__ import annotations
 
@@ -14,15 +14,21 @@ __all__ = ["FINDINGS", "Finding", "markdown", "outcome"]
 
 @dataclass(frozen=True)
 class Finding:
-    """One of the paper's on-plate findings: row `key`'s `column` against the full policy's (the ratio ablation / full
-    classed by :func:`outcome`), checked on our rows trained from scratch (`scratch`, against the from-scratch full
-    policy) and from a teacher (`teacher`, against `teacher_full`); None: no such row of ours."""
+    """One of the paper's findings: row `key`'s `column` against the full policy's of its task (``<task>/test_set``;
+    the ratio ablation / full classed by :func:`outcome`), checked on our rows trained from scratch (`scratch`,
+    against ``<task>/test_set_scratch``) and from a teacher (`teacher`, against `teacher_full`, by default
+    ``<task>/test_set``); None: no such row of ours."""
 
     key: str
     column: str
     scratch: str | None
     teacher: str | None
-    teacher_full: str = "on_plate/test_set"
+    teacher_full: str | None = None
+
+    @property
+    def full(self) -> str:
+        """The paper's full policy of the finding's task (``<task>/test_set``)."""
+        return f"{self.key.split('/')[0]}/test_set"
 
 
 #: The findings, in the table's order: success for the state and open-loop ablations, the penalised quantity (and
@@ -30,7 +36,8 @@ class Finding:
 FINDINGS: tuple[Finding, ...] = (
     Finding("on_plate/open_loop_evaluation", "success_pct", "on_plate/open_loop_evaluation_scratch",
             "on_plate/open_loop_evaluation"),
-    Finding("on_plate/open_loop_training", "success_pct", None, "on_plate/open_loop_training"),
+    Finding("on_plate/open_loop_training", "success_pct", "on_plate/open_loop_training_scratch",
+            "on_plate/open_loop_training"),
     Finding("on_plate/no_current_position", "success_pct", "on_plate/no_current_position_scratch",
             "on_plate/no_current_position"),
     Finding("on_plate/no_current_velocity", "success_pct", "on_plate/no_current_velocity_scratch",
@@ -39,7 +46,8 @@ FINDINGS: tuple[Finding, ...] = (
             "on_plate/no_current_acceleration"),
     Finding("on_plate/no_following_positions", "success_pct", "on_plate/no_following_positions_scratch",
             "on_plate/no_following_positions"),
-    Finding("on_plate/ten_following_positions", "success_pct", None, "on_plate/ten_following_positions"),
+    Finding("on_plate/ten_following_positions", "success_pct", "on_plate/ten_following_positions_scratch",
+            "on_plate/ten_following_positions"),
     Finding("on_plate/no_jerk_penalty", "success_pct", "on_plate/no_jerk_penalty_scratch",
             "on_plate/no_jerk_penalty", "on_plate/test_set_ppo"),
     Finding("on_plate/no_jerk_penalty", "jerk_pct", "on_plate/no_jerk_penalty_scratch", "on_plate/no_jerk_penalty",
@@ -48,6 +56,10 @@ FINDINGS: tuple[Finding, ...] = (
             "on_plate/no_acceleration_penalty", "on_plate/test_set_ppo"),
     Finding("on_plate/no_acceleration_penalty", "acc_pct", "on_plate/no_acceleration_penalty_scratch",
             "on_plate/no_acceleration_penalty", "on_plate/test_set_ppo"),
+    Finding("in_place/open_loop_evaluation", "success_pct", "in_place/open_loop_evaluation_scratch",
+            "in_place/open_loop_evaluation"),
+    Finding("in_place/open_loop_training", "success_pct", "in_place/open_loop_training_scratch",
+            "in_place/open_loop_training"),
 )
 
 
@@ -80,24 +92,26 @@ def _finding_cells(pair: tuple[float, float] | None, column: str, paper_class: s
 
 
 def markdown(results: dict[str, Any]) -> list[str]:
-    """Which of the paper's on-plate findings our rows reproduce, from scratch and from a teacher: the ablation's value
+    """Which of the paper's findings our rows reproduce, from scratch and from a teacher: the ablation's value
     over the full policy's, classed the same way for the paper and for us."""
     p = paper()
     idx = {c: i for i, c in enumerate(p["columns"])}
     names = dict(zip(COLUMNS, ("success", "fraction", "error distance", "\\|acc\\|", "\\|jerk\\|"), strict=True))
-    lines = ["", "Which of the paper's on-plate findings hold here. Each cell: the ablation's value / the full "
-             "policy's (%), and its class: success *fails* below 0.25x the full policy's, *partly* below 0.9x, else "
-             "*keeps*; a penalised quantity *rises* above 2x, else *stays*. The full policies: the paper's; ours from "
-             "scratch (`iiwa7_trueadapt_on_plate_ppo_scratch`, seed 0); ours from a teacher (the distilled policy; for "
-             "the penalties the distilled policy + PPO, whose runs drop the penalty). Same class as the paper: *yes*.",
+    lines = ["", "Which of the paper's findings hold here (on plate; in place, the open-loop rows). Each cell: the "
+             "ablation's value / the full policy's (%), and its class: success *fails* below 0.25x the full "
+             "policy's, *partly* below 0.9x, else *keeps*; a penalised quantity *rises* above 2x, else *stays*. "
+             "The full policies: the paper's; ours from scratch (`iiwa7_trueadapt_<task>_ppo_scratch`, seed 0); "
+             "ours from a teacher (the distilled policy; for the penalties the distilled policy + PPO, whose runs "
+             "drop the penalty). Same class as the paper: *yes*.",
              "", "| the paper's setting | value | paper | from scratch | same | from a teacher | same |",
              "|---|---|---|---|---|---|---|"]
     for f in FINDINGS:
-        full = p["rows"]["on_plate/test_set"][idx[f.column]]
+        full = p["rows"][f.full][idx[f.column]]
         value = p["rows"][f.key][idx[f.column]]
         cls = outcome(value / full, f.column)
-        cells = (_finding_cells(_ours_ratio(results, f.scratch, "on_plate/test_set_scratch", f.column), f.column, cls)
-                 + _finding_cells(_ours_ratio(results, f.teacher, f.teacher_full, f.column), f.column, cls))
+        teacher_full = f.teacher_full or f.full
+        cells = (_finding_cells(_ours_ratio(results, f.scratch, f"{f.full}_scratch", f.column), f.column, cls)
+                 + _finding_cells(_ours_ratio(results, f.teacher, teacher_full, f.column), f.column, cls))
         lines.append(f"| {_BY_KEY[f.key].setting} | {names[f.column]} | {value:.1f} / {full:.1f} ({cls}) | "
                      + " | ".join(cells) + " |")
     return lines
