@@ -50,3 +50,20 @@ def test_tiny_training_with_the_curriculum_and_its_refusal(tiny_dataset, tmp_pat
     r = run(train_cmd(tiny_dataset, tmp_path / "pb", 1, exp, cur, "task.backend=pybullet"))
     assert r.returncode != 0
     assert "task.curriculum needs the analytic ball" in r.stderr.strip().splitlines()[-1]
+
+
+def test_curriculum_reaches_the_ball_behind_a_frozen_sensor():
+    """Open loop (the sensor frozen), the ball is still analytic: the curriculum sets it, now and after updates."""
+    from types import SimpleNamespace
+
+    from pathrl.sim.feedback import FrozenSensor
+    from pathrl.train.runner import _ball_curriculum
+
+    ball = AnalyticBall(load_robot_by_name("iiwa7"), 8, seed=0)
+    hooks = []
+    runner = SimpleNamespace(env=SimpleNamespace(generator=None, feedback=FrozenSensor(ball)),
+                             current_learning_iteration=50, after_each_update=hooks.append)
+    _ball_curriculum(runner, BallCurriculumCfg(iterations=100, friction_scale=100.0, start_spread=0.2))
+    assert math.isclose(ball.roll_scale, 10.0)  # iteration 50 of 100: 100 ** 0.5
+    hooks[0](100)
+    assert math.isclose(ball.roll_scale, 1.0)

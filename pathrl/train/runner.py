@@ -429,6 +429,7 @@ def curriculum_scales(it: int, cur: BallCurriculumCfg) -> tuple[float, float]:
 def _ball_curriculum(runner: PathRLRunner, cur: BallCurriculumCfg) -> None:
     """Set the training env's ball curriculum before every rollout (ValueError: no analytic ball to set it on)."""
     ball = getattr(unwrapped(runner.env), "feedback", None)
+    ball = getattr(ball, "inner", ball)  # open loop: the ball behind the frozen sensor
     if not hasattr(ball, "set_curriculum"):
         raise ValueError("task.curriculum needs the analytic ball in training (task.feedback ball_on_plate, "
                          "task.backend analytic)")
