@@ -8,6 +8,7 @@ import math
 import numpy as np
 import pytest
 
+from pathrl import native
 from pathrl.industrial import drives, dynamics
 from pathrl.industrial.controller import ControllerParams, execute
 from pathrl.industrial.ilc import ILCParams, run_ilc
@@ -81,6 +82,51 @@ def test_gear_step_overshoots_by_the_configured_elasticity():
         overshoot = math.exp(-math.pi * zeta / math.sqrt(1 - zeta**2))
         assert (q.max() - 1e-3) / 1e-3 == pytest.approx(overshoot, rel=0.02)
         assert np.argmax(q) * 1e-4 == pytest.approx(math.pi / (w * math.sqrt(1 - zeta**2)), rel=0.02)
+
+
+def _recorded_drive_loop(monkeypatch) -> tuple:
+    """The drive loop's arguments in an ABB-model execution of a short MoveL program (recorded on the way)."""
+    calls = []
+    monkeypatch.setattr(drives, "drive_loop", lambda *args: calls.append(args) or drives.drive_loop_python(*args))
+    execute(_program([[1500, -200, 800], [1500, 0, 800], [1500, 100, 1000]]), 500.0, ControllerParams(model="abb"))
+    assert len(calls) == 1
+    return calls[0]
+
+
+def test_native_drive_loop_matches_the_python_loop(monkeypatch):
+    if not native.available():
+        pytest.skip("native code unavailable")
+    args = _recorded_drive_loop(monkeypatch)
+    monkeypatch.undo()
+    state = [x.copy() for x in args[2]]
+    q_py, q_c = drives.drive_loop_python(*args), native.drive_loop(*args)
+    assert q_c.shape == q_py.shape == (len(args[0][0]), 6) and len(q_py) > 500
+    assert np.ptp(q_py, axis=0).max() > 0.1  # the arm moves
+    assert np.abs(q_c - q_py).max() <= 1e-9
+    assert all(np.array_equal(a, b) for a, b in zip(args[2], state, strict=True))  # initial state kept
+    np.testing.assert_array_equal(drives.drive_loop(*args), q_c)  # used where available
+    monkeypatch.setattr(native, "available", lambda: False)
+    np.testing.assert_array_equal(drives.drive_loop(*args), q_py)  # the Python loop otherwise
+
+
+@pytest.mark.parametrize("impl", ["python", "native"])
+def test_drive_loop_two_steps_by_hand(impl):
+    """dt 0.5, kp 2, kv 1, ki 0, no friction, b 1, K 4, D 2, M^-1 = I, setpoint 1 on axes 0 and 1 (torque limit
+    0.5 on axis 1). Axis 0, step 1: ev 2, tau_m 2, thd 1, th 0.5; step 2: ev 0, tau_s 4 * 0.5 + 2 * 1 = 4, thd -1,
+    qd 2, q 1. Axis 1: tau_m 0.5, thd 0.25, th 0.125; ev 1.5 -> 0.5, tau_s 1, thd 0, qd 0.5, q 0.25."""
+    if impl == "native" and not native.available():
+        pytest.skip("native code unavailable")
+    loop = drives.drive_loop_python if impl == "python" else native.drive_loop
+    th_r = np.zeros((2, 6))
+    th_r[:, :2] = 1.0
+    zeros = np.zeros((2, 6))
+    series = (th_r, zeros, zeros, zeros, np.repeat(np.eye(6)[None], 2, 0))
+    ones = np.ones(6)
+    axes = (2 * ones, ones, 0 * ones, np.r_[10.0, 0.5, 10.0, 10.0, 10.0, 10.0], 4 * ones, 2 * ones, ones,
+            0 * ones, 0 * ones)
+    q = loop(series, axes, tuple(np.zeros(6) for _ in range(5)), 1.0, 0.0, 0.5)
+    np.testing.assert_array_equal(q[:, :2], [[0.0, 0.0], [1.0, 0.25]])
+    assert not q[:, 2:].any()
 
 
 def test_curve1_calibration_against_the_recording():

@@ -45,7 +45,8 @@ import numpy as np
 
 from pathrl.industrial.dynamics import Dynamics
 
-__all__ = ["NOMINAL_Q", "DriveParams", "gear_matrices", "gear_step", "simulate"]
+__all__ = ["NOMINAL_Q", "DriveParams", "drive_loop", "drive_loop_python", "gear_matrices", "gear_step",
+           "simulate"]
 
 #: The pose whose mass matrix sets the gear stiffness (the curve-1 recording's start configuration, rad).
 NOMINAL_Q = np.array([-0.58589046, -0.03341733, 0.40482559, -2.79157683, -1.61501501, 0.95669868])
@@ -146,10 +147,38 @@ def simulate(q_r: np.ndarray, rate: float, true: Dynamics, model: Dynamics, k_ge
     q = th - h_true[0] / k_gear  # the link at rest on its gear, loaded by gravity
     qd = np.zeros(6)
     integ = (h_true[0] - tau_ff[0]) / ki  # the integrator holds what the feed-forward misses of gravity
-    out = np.empty((n, 6))
-    kp, ffv = np.asarray(params.kp), params.ff_vel
-    for k in range(n):
-        ev = kp * (th_r_s[k] - th) + ffv * thd_r_s[k] - thd
+    series = (th_r_s, thd_r_s, tff_s, h_s, minv_s)
+    axes = (np.asarray(params.kp, dtype=float), kv, ki, tmax, k_gear, d_gear, b, fc, fv)
+    out = drive_loop(series, axes, (th, thd, q, qd, integ), f_scale, params.ff_vel, dt)
+    return out[::factor][delay:]
+
+
+def drive_loop(series: tuple[np.ndarray, ...], axes: tuple[np.ndarray, ...], state: tuple[np.ndarray, ...],
+               f_scale: float, ff_vel: float, dt: float) -> np.ndarray:
+    """The drive-train loop of :func:`simulate` (arguments of :func:`drive_loop_python`): the native build
+    (:func:`pathrl.native.drive_loop`) where available, else the Python reference (same results to rounding)."""
+    from pathrl import native  # here, not at the top: it imports torch, which the controller does not need
+
+    if native.available():
+        return native.drive_loop(series, axes, state, f_scale, ff_vel, dt)
+    return drive_loop_python(series, axes, state, f_scale, ff_vel, dt)
+
+
+def drive_loop_python(series: tuple[np.ndarray, ...], axes: tuple[np.ndarray, ...], state: tuple[np.ndarray, ...],
+                      f_scale: float, ff_vel: float, dt: float) -> np.ndarray:
+    """Link angles (n, 6) rad after each semi-implicit Euler step of `dt` s of the drives and servos (module doc),
+    the reference of ``pathrl/native/drives.c``. `series` (at the integration rate): motor setpoints th_r (n, 6),
+    their rates thd_r (n, 6), feed-forward torques tau_ff (n, 6), the plant's bias torques h (n, 6) and inverse mass
+    matrices (n, 6, 6); `axes` (6,) each: position gains kp, velocity gains kv, integral gains ki, torque limits,
+    gear stiffness and damping, reflected rotor inertia b, Coulomb and viscous friction; `state` (6,) each: the
+    initial motor angles th, rates thd, link angles q, rates qd and velocity-loop integrators (not modified);
+    `f_scale` the run's friction scale, `ff_vel` the velocity feed-forward share."""
+    th_r_s, thd_r_s, tff_s, h_s, minv_s = series
+    kp, kv, ki, tmax, k_gear, d_gear, b, fc, fv = axes
+    th, thd, q, qd, integ = (np.array(x, dtype=float) for x in state)
+    out = np.empty((len(th_r_s), 6))
+    for k in range(len(th_r_s)):
+        ev = kp * (th_r_s[k] - th) + ff_vel * thd_r_s[k] - thd
         integ += ev * dt
         tau_m = np.clip(kv * ev + ki * integ + tff_s[k], -tmax, tmax)
         tau_s = k_gear * (th - q) + d_gear * (thd - qd)
@@ -159,7 +188,7 @@ def simulate(q_r: np.ndarray, rate: float, true: Dynamics, model: Dynamics, k_ge
         th = th + dt * thd
         q = q + dt * qd
         out[k] = q
-    return out[::factor][delay:]
+    return out
 
 
 def _resample_idx(x: np.ndarray, idx: np.ndarray, n: int) -> np.ndarray:

@@ -1,19 +1,24 @@
-"""Native builds of the two hot kernels of an env step, loaded with ctypes (CPU, float64).
+"""Native builds of hot kernels, loaded with ctypes (CPU, float64): two of an env step, one of the industrial
+controller model.
 
 * ``valid_range.c``: the valid acceleration range of :mod:`pathrl.limits.feasible`, one element at a
   time, branching where the torch code must work on data-dependent subsets, so an element does only the
   work it needs and no per-op dispatch is paid.
 * ``advance.c``: the env's integration, progress and deviation (:func:`pathrl.envs.tracking.advance`).
+* ``drives.c``: the 1 kHz drive-train loop of the industrial controller model
+  (:func:`pathrl.industrial.drives.drive_loop_python`, numpy in and out; :func:`drive_loop`).
 
-The torch code is the reference (and runs on any device); the tests compare both. The C files are
-compiled on first use with the system C compiler (``$CC``, default ``cc``; no torch headers, about a
-second) into one library in ``$PATHRL_CACHE_DIR`` (default ``~/.cache/pathrl``), named by the hash of the
-sources, so an edited source is rebuilt and a stale library is never loaded. No compiler: the torch code
-runs instead (:func:`available` is False; one warning). ``PATHRL_NATIVE=0`` makes the native code unavailable
-(the documented way to run without it, e.g. to compare). Whether available native code is used is chosen by the
-limit backend in effect (:class:`pathrl.limits.backend.LimitBackend`, ``native``; default on).
+The torch code is the reference of the env kernels (and runs on any device), the numpy loop that of the drive
+loop; the tests compare each pair. The C files are compiled on first use with the system C compiler (``$CC``,
+default ``cc``; no torch headers, about a second) into one library in ``$PATHRL_CACHE_DIR`` (default
+``~/.cache/pathrl``), named by the hash of the sources, so an edited source is rebuilt and a stale library is never
+loaded. No compiler: the reference code runs instead (:func:`available` is False; one warning).
+``PATHRL_NATIVE=0`` makes the native code unavailable (the documented way to run without it, e.g. to compare).
+Whether available native code is used is chosen, for the env kernels, by the limit backend in effect
+(:class:`pathrl.limits.backend.LimitBackend`, ``native``; default on); the drive loop uses it whenever available.
 
-Rows are split over :func:`threads` threads (torch's count unless set); ctypes releases the GIL during a call.
+The env kernels' rows are split over :func:`threads` threads (torch's count unless set); ctypes releases the GIL
+during a call.
 """
 
 from __future__ import annotations
@@ -28,12 +33,14 @@ import warnings
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
+import numpy as np
 import torch
 from torch import Tensor
 
-__all__ = ["advance", "advance_supports", "applies", "available", "set_threads", "threads", "valid_range"]
+__all__ = ["advance", "advance_supports", "applies", "available", "drive_loop", "set_threads", "threads",
+           "valid_range"]
 
-SOURCES = tuple(Path(__file__).with_name(name) for name in ("valid_range.c", "advance.c"))
+SOURCES = tuple(Path(__file__).with_name(name) for name in ("valid_range.c", "advance.c", "drives.c"))
 FLAGS = ("-O3", "-fPIC", "-shared", "-fno-fast-math", "-std=c99")
 MIN_ROWS_PER_THREAD = 256  # below this a second thread costs more than it saves
 
@@ -71,7 +78,7 @@ def _library() -> ctypes.CDLL | None:
     except (OSError, subprocess.CalledProcessError) as err:
         failed_build = isinstance(err, subprocess.CalledProcessError) and err.stderr
         detail = err.stderr.strip().splitlines()[-1] if failed_build else err
-        warnings.warn(f"pathrl: native code unavailable ({detail}); using the torch code", stacklevel=2)
+        warnings.warn(f"pathrl: native code unavailable ({detail}); using the reference code", stacklevel=2)
         return None
     dptr, i64 = ctypes.POINTER(ctypes.c_double), ctypes.c_int64
     lib.pathrl_valid_range.argtypes = [dptr, dptr, dptr, i64, i64, i64, dptr, dptr, dptr, dptr, dptr,
@@ -81,6 +88,8 @@ def _library() -> ctypes.CDLL | None:
     lib.pathrl_advance.argtypes = [dptr, dptr, dptr, dptr, i64, i64, i64, lp, i64, dptr, dptr, lp, dptr, i64, dptr,
                                    dptr, ctypes.c_double, i64, ctypes.c_double, dptr, dptr, dptr, dptr, dptr]
     lib.pathrl_advance.restype = ctypes.c_int
+    lib.pathrl_drive_loop.argtypes = [dptr] * 5 + [i64] + [dptr] * 9 + [ctypes.c_double] * 3 + [dptr] * 6
+    lib.pathrl_drive_loop.restype = None
     return lib
 
 
@@ -105,6 +114,10 @@ def _pool(workers: int) -> ThreadPoolExecutor:
 
 def _ptr(t: Tensor, kind=ctypes.c_double):
     return ctypes.cast(t.data_ptr(), ctypes.POINTER(kind))
+
+
+def _np_ptr(x: np.ndarray):
+    return x.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
 
 
 def valid_range(p: Tensor, v: Tensor, a: Tensor, pos: Tensor, vel: Tensor, acc: Tensor, jerk: Tensor,
@@ -192,3 +205,27 @@ def advance(pos: Tensor, vel: Tensor, acc: Tensor, a1: Tensor, path_index: Tenso
     if any(_over_rows(lib.pathrl_advance, n, head, tail)):  # advance.c checks the sizes itself too
         raise RuntimeError("native advance rejected sizes that advance_supports accepted")
     return p1, v1, moved, dev_max, dev_mean
+
+
+def drive_loop(series: tuple[np.ndarray, ...], axes: tuple[np.ndarray, ...], state: tuple[np.ndarray, ...],
+               f_scale: float, ff_vel: float, dt: float) -> np.ndarray:
+    """Native :func:`pathrl.industrial.drives.drive_loop_python` (same arguments and result): `series` the motor
+    setpoints th_r, their rates thd_r, the feed-forward torques tau_ff, the plant's bias torques h (n, 6) and its
+    inverse mass matrices (n, 6, 6); `axes` kp, kv, ki, tau_max, k_gear, d_gear, b, fc, fv (6,); `state` the
+    initial th, thd, q, qd, integ (6,), not modified. Returns the link angles (n, 6) after each step."""
+    lib = _library()
+    if lib is None:
+        raise RuntimeError("native code unavailable")
+    if len(series) != 5 or len(axes) != 9 or len(state) != 5:
+        raise ValueError("native drive_loop: 5 series, 9 axis vectors and 5 state vectors expected")
+    series = tuple(np.ascontiguousarray(x, dtype=np.float64) for x in series)
+    n = len(series[0])
+    shapes = [x.shape for x in series] + [np.shape(x) for x in (*axes, *state)]
+    if shapes != [(n, 6)] * 4 + [(n, 6, 6)] + [(6,)] * 14:
+        raise ValueError(f"native drive_loop: shapes {shapes}, expected (n, 6) x4, (n, 6, 6), (6,) x14")
+    axes = tuple(np.ascontiguousarray(x, dtype=np.float64) for x in axes)
+    state = tuple(np.array(x, dtype=np.float64) for x in state)  # fresh copies: the C code updates them in place
+    out = np.empty((n, 6))
+    lib.pathrl_drive_loop(*map(_np_ptr, series), n, *map(_np_ptr, axes), float(f_scale), float(ff_vel), float(dt),
+                          *map(_np_ptr, state), _np_ptr(out))
+    return out
