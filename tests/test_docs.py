@@ -141,7 +141,7 @@ def _check_keys_exist(cfg, overrides: list[str]) -> None:
     for ov in overrides:
         key, _, value = ov.partition("=")
         key = key.lstrip("+~").split("@")[0]
-        if (ROOT / "conf" / key).is_dir():  # a group: some option must fit the pattern, e.g. <row>_continue
+        if (ROOT / "conf" / key).is_dir():  # a group: some option must fit the pattern, e.g. <row>_length<weight>
             pattern = re.sub(r"<[^>]*>", "*", value)
             if not list((ROOT / "conf" / key).glob(f"{pattern}.yaml")):
                 raise AssertionError(f"no option of conf/{key}/ fits {value!r}")

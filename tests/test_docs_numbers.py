@@ -506,8 +506,8 @@ RECEIPTS += [
       rcp("armar4_target_point", "duration_s"), rcp("armar4_target_point", "cart_pos_dev_mean_cm"),
       ratio(rcp("armar4_target_point", "duration_s"), t("VI", "armar4_fixed/target_point", "toppra_duration_s")),
       p("I", "armar4_fixed/target_point", "duration_s"), p("I", "armar4_fixed/target_point", "cart_pos_dev_mean_cm")),
-    R(RES, "re-exploring at path-length weight 6", cfg("armar4_target_point_fast", "reward.terms.path_length.weight")),
-    R(RES, "`_fast_continue2`, `armar4_target_point_length6`: 5.54 s at 3.67 cm, then the path length weighted 8 for\n"
+    R(RES, "re-exploring at path-length weight 6", cfg("armar4_target_point_length6_explore", "reward.terms.path_length.weight")),
+    R(RES, "`_length6_low_noise2`, `armar4_target_point_length6`: 5.54 s at 3.67 cm, then\nthe path length weighted 8 for\n"
            "`models/tracking/armar4_target_point_length8`): 5.48 s at 3.75 cm, 1.57x TOPP-RA",
       raw("armar4_target_point_length6", "duration_s"), raw("armar4_target_point_length6",
       "cart_pos_dev_mean_cm"),
