@@ -22,7 +22,7 @@ from pathrl.envs.tracking_cfg import EnvSettings
 
 __all__ = [
     "BallCurriculumCfg", "CriticWarmupCfg", "DatasetAppCfg", "DatasetCfg", "EvalAppCfg", "EvalDatasetCfg",
-    "ExportAppCfg", "ExportDatasetCfg", "KnotsCfg", "LrDecayCfg", "RewardCfg", "RobotCfg", "StdAnnealCfg", "TaskCfg",
+    "ExportAppCfg", "ExportDatasetCfg", "KnotsCfg", "LrDecayCfg", "RewardCfg", "RewardCurriculumCfg", "RobotCfg", "StdAnnealCfg", "TaskCfg",
     "TcpCfg", "ToppraAppCfg", "TrainAppCfg", "WorkspaceCfg", "config_dict", "train_app_cfg",
 ]
 
@@ -187,6 +187,17 @@ class BallCurriculumCfg:
 
 
 @dataclass
+class RewardCurriculumCfg:
+    """A curriculum on one reward term's weight (``reward_curriculum``; training only): the term ``term`` starts at
+    weight ``initial`` and moves linearly to the reward's configured weight, reached at iteration ``iterations``. It
+    depends only on the iteration, so a resumed run continues it."""
+
+    term: str = MISSING
+    initial: float = MISSING
+    iterations: int = 1000
+
+
+@dataclass
 class TaskCfg:
     """Sensory-feedback task (``conf/task/*.yaml``): ``feedback: null`` is plain path tracking."""
 
@@ -266,6 +277,8 @@ class TrainAppCfg:
     # bound, seed}; pathrl.train.bias_search); empty: none
     bias_search: dict[str, Any] = field(default_factory=dict)
     lr_decay: LrDecayCfg = field(default_factory=LrDecayCfg)  # a falling learning rate (lr_decay.final=1e-5)
+    # one reward term's weight moved from another value to the reward's own (pathrl.train.curricula); None: none
+    reward_curriculum: RewardCurriculumCfg | None = None
 
 
 def train_app_cfg(values: Mapping[str, Any]) -> TrainAppCfg:

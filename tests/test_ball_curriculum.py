@@ -9,7 +9,7 @@ import torch
 from pathrl.robot.external import load_robot_by_name
 from pathrl.schema import BallCurriculumCfg
 from pathrl.sim.feedback import AnalyticBall
-from pathrl.train.runner import curriculum_scales
+from pathrl.train.curricula import curriculum_scales
 from tests.test_train import run, train_cmd
 
 
@@ -57,13 +57,45 @@ def test_curriculum_reaches_the_ball_behind_a_frozen_sensor():
     from types import SimpleNamespace
 
     from pathrl.sim.feedback import FrozenSensor
-    from pathrl.train.runner import _ball_curriculum
+    from pathrl.train.curricula import apply_ball_curriculum
 
     ball = AnalyticBall(load_robot_by_name("iiwa7"), 8, seed=0)
     hooks = []
     runner = SimpleNamespace(env=SimpleNamespace(generator=None, feedback=FrozenSensor(ball)),
                              current_learning_iteration=50, after_each_update=hooks.append)
-    _ball_curriculum(runner, BallCurriculumCfg(iterations=100, friction_scale=100.0, start_spread=0.2))
+    apply_ball_curriculum(runner, BallCurriculumCfg(iterations=100, friction_scale=100.0, start_spread=0.2))
     assert math.isclose(ball.roll_scale, 10.0)  # iteration 50 of 100: 100 ** 0.5
     hooks[0](100)
     assert math.isclose(ball.roll_scale, 1.0)
+
+
+def test_reward_weight_schedule_by_hand_and_on_the_env():
+    """The path-length weight 1 -> 4 over 100 iterations: 2.5 half way, 4 from then on; set on the env's term."""
+    from types import SimpleNamespace
+
+    from pathrl.envs.rewards import build_reward_terms
+    from pathrl.schema import RewardCurriculumCfg
+    from pathrl.train.curricula import apply_reward_curriculum, reward_weight
+
+    cur = RewardCurriculumCfg(term="path_length", initial=1.0, iterations=100)
+    assert [reward_weight(it, cur, 4.0) for it in (0, 50, 100, 900)] == pytest.approx([1.0, 2.5, 4.0, 4.0])
+    terms = build_reward_terms({"path_length": {"weight": 4.0}, "ball_centre": {"weight": 1.0}})
+    hooks = []
+    runner = SimpleNamespace(env=SimpleNamespace(generator=None, reward_terms=terms), current_learning_iteration=25,
+                             after_each_update=hooks.append)
+    apply_reward_curriculum(runner, cur)
+    assert terms[0].weight == pytest.approx(1.75) and terms[1].weight == 1.0  # 1 + 3 * 25 / 100; the other kept
+    hooks[0](100)
+    assert terms[0].weight == pytest.approx(4.0)
+    with pytest.raises(ValueError, match="the reward has no term 'ball'; it has path_length, ball_centre"):
+        apply_reward_curriculum(runner, RewardCurriculumCfg(term="ball", initial=1.0))
+
+
+def test_tiny_training_with_the_reward_curriculum(tiny_dataset, tmp_path):
+    exp = "+experiment=iiwa7_ball_balancing_reward_scratch_length_curriculum"
+    r = run(train_cmd(tiny_dataset, tmp_path / "rc", 2, exp, "reward_curriculum.iterations=2"))
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert (tmp_path / "rc" / "model_1.pt").exists()
+    r = run(train_cmd(tiny_dataset, tmp_path / "bad", 1, exp, "reward_curriculum.term=lenght"))
+    assert r.returncode != 0
+    assert "the reward has no term 'lenght'" in r.stderr.strip().splitlines()[-1]

@@ -30,7 +30,7 @@ from pathrl.limits.backend import LimitBackend
 from pathrl.policy import policy_role
 from pathrl.policy.models import MixedMLP
 from pathrl.policy.residual import ControllerObs, ResidualEnv, check_residual_cfg, zero_last_layer
-from pathrl.schema import BallCurriculumCfg, TrainAppCfg, config_dict, train_app_cfg
+from pathrl.schema import TrainAppCfg, config_dict, train_app_cfg
 from pathrl.storage import (
     atomic_write,
     checkpoint_iteration,
@@ -39,12 +39,13 @@ from pathrl.storage import (
     save_checkpoint,
     write_json_atomic,
 )
+from pathrl.train.curricula import apply_ball_curriculum, apply_reward_curriculum
 from pathrl.train.placement import placement_warning, resume_notes, start_notes
 from pathrl.train.resume import RESUME_MAY_CHANGE, config_change, finished_summary, resume_checkpoint, resume_point
 
 __all__ = [
     "PathRLDistillationRunner", "PathRLRunner", "RESUME_MAY_CHANGE", "check_run_cfg", "config_change",
-    "curriculum_scales", "float32_iteration", "resume_point", "log_linear", "rsl_train_cfg", "train",
+    "float32_iteration", "resume_point", "log_linear", "rsl_train_cfg", "train",
 ]
 
 
@@ -415,30 +416,9 @@ def _schedules(runner: PathRLRunner, cfg: TrainAppCfg) -> None:
     if cfg.float32_from is not None:
         runner.set_float32_from(float32_iteration(cfg.float32_from, total))
     if cfg.task.curriculum is not None:
-        _ball_curriculum(runner, cfg.task.curriculum)
-
-
-def curriculum_scales(it: int, cur: BallCurriculumCfg) -> tuple[float, float]:
-    """(rolling-friction scale, start spread) of new balls at iteration `it` of the ball curriculum: the friction
-    scale log-linear from ``cur.friction_scale`` to 1, the spread linear from ``cur.start_spread`` to 1, both reached
-    at ``cur.iterations``."""
-    frac = min(max(it / max(cur.iterations, 1), 0.0), 1.0)
-    return cur.friction_scale ** (1.0 - frac), cur.start_spread + (1.0 - cur.start_spread) * frac
-
-
-def _ball_curriculum(runner: PathRLRunner, cur: BallCurriculumCfg) -> None:
-    """Set the training env's ball curriculum before every rollout (ValueError: no analytic ball to set it on)."""
-    ball = getattr(unwrapped(runner.env), "feedback", None)
-    ball = getattr(ball, "inner", ball)  # open loop: the ball behind the frozen sensor
-    if not hasattr(ball, "set_curriculum"):
-        raise ValueError("task.curriculum needs the analytic ball in training (task.feedback ball_on_plate, "
-                         "task.backend analytic)")
-
-    def apply(it: int) -> None:
-        ball.set_curriculum(*curriculum_scales(it, cur))
-
-    apply(runner.current_learning_iteration)
-    runner.after_each_update(apply)
+        apply_ball_curriculum(runner, cfg.task.curriculum)
+    if cfg.reward_curriculum is not None:
+        apply_reward_curriculum(runner, cfg.reward_curriculum)
 
 
 def _check_lr_decay(cfg: TrainAppCfg) -> None:
