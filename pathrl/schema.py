@@ -22,8 +22,9 @@ from pathrl.envs.tracking_cfg import EnvSettings
 
 __all__ = [
     "BallCurriculumCfg", "CriticWarmupCfg", "DatasetAppCfg", "DatasetCfg", "EvalAppCfg", "EvalDatasetCfg",
-    "ExportAppCfg", "ExportDatasetCfg", "KnotsCfg", "LrDecayCfg", "RewardCfg", "RewardCurriculumCfg", "RobotCfg", "StdAnnealCfg", "TaskCfg",
-    "TcpCfg", "ToppraAppCfg", "TrainAppCfg", "WorkspaceCfg", "config_dict", "train_app_cfg",
+    "ExportAppCfg", "ExportDatasetCfg", "KnotsCfg", "LrDecayCfg", "RewardCfg", "RewardCurriculumCfg", "RobotCfg",
+    "StdAnnealCfg", "TaskCfg", "TcpCfg", "ToppraAppCfg", "TrainAppCfg", "WorkspaceCfg", "config_dict",
+    "train_app_cfg",
 ]
 
 
