@@ -4,7 +4,7 @@
     .venv/bin/python tools/lab/industrial_abb.py ilc         # -> results/industrial_abb_ilc.md
     .venv/bin/python tools/lab/industrial_abb.py mpgd_gain   # -> results/industrial_abb_mpgd_gain.md
     .venv/bin/python tools/lab/industrial_abb.py table2 RUN_DIR [OUT.md]  # -> results/industrial_abb_table2.md
-    .venv/bin/python tools/lab/industrial_abb.py table3 RUN_DIR  # -> results/industrial_abb_table3.md
+    .venv/bin/python tools/lab/industrial_abb.py table3 RUN_DIR [V_MAX_FACTOR]  # -> results/industrial_abb_table3.md
     .venv/bin/python tools/lab/industrial_abb.py critic RUN_DIR/model_K.pt  # the critic vs the one-step reward
 
 ``table2`` runs MPGD, both ILC variants (``ILCColumns``: the gains as tuned by ``ilc``, 1 and 1) and the policy of RUN_DIR
@@ -190,9 +190,10 @@ def _specs_cells(errs) -> str:
             f"{mark(errs.speed_std_ratio > SPEED_STD_SPEC)}")
 
 
-def table3(run_dir: str) -> str:
+def table3(run_dir: str, v_max: float = 2.0) -> str:
     """Table III on the calibrated model: per method (MPGD, both ILC variants, the policy of RUN_DIR) and row the
-    IWA at the row's command ("IWA only") and the bisection's fastest command meeting all three specs (markdown)."""
+    IWA at the row's command ("IWA only") and the bisection's fastest command meeting all three specs, searched
+    between 0.2 and `v_max` x the row's command (markdown)."""
     from pathrl.industrial.controller import ControllerParams
     from pathrl.industrial.experiments import select_targets, speed_iwa
     from pathrl.industrial.ilc import ILCColumns
@@ -210,17 +211,20 @@ def table3(run_dir: str) -> str:
             "bisection: v cmd (mm/s) | error (mm) | ori. (deg) | mean speed (mm/s) | speed std (%) | executions | "
             "wall time (s) |")
     out = ["# Table III on the calibrated model (controller.model=abb): IWA + bisection speed search", "",
-           f"`python tools/lab/industrial_abb.py table3 {run_dir}` (one core; policy iteration {it}, action clip "
+           f"`python tools/lab/industrial_abb.py table3 {run_dir} {v_max:g}` (one core; policy iteration {it}, "
+           f"action clip "
            f"{clip:g}; MPGD gain 0.5, k_max 50; ILC gains {ILCColumns().gain_p:g} (P) and "
            f"{ILCColumns().gain_filtered:g} (filtered), k_max 10; RL k_max 10; bisection: 10 outer iterations "
-           "between 0.2 and 2 x the row's command). * = spec missed (0.5 mm, 3 deg, 5 %); N/A = no command met all "
+           f"between 0.2 and {v_max:g} x the row's command). * = spec missed (0.5 mm, 3 deg, 5 %); N/A = no command "
+           "met all "
            "three.", "", head, "|" + "---|" * 14]
     summary = []
     for name, kw in methods.items():
         t0, met, speeds = time.perf_counter(), 0, []
         for t in select_targets([]):
             inner = speed_iwa(t, ctrl, settings, 0, kw.get("policy"), kw.get("ilc"))
-            res = bisection_search(t, t.speed, SearchParams(), None, ctrl, 0, baseline_program(t), inner)
+            search = SearchParams(v_max_factor=v_max)
+            res = bisection_search(t, t.speed, search, None, ctrl, 0, baseline_program(t), inner)
             first = res.trials[0][2].errors
             n_exec = sum(r.executions for _, _, r in res.trials)
             best = "N/A | - | - | - | -" if res.best is None else f"{res.v:.0f} | {_specs_cells(res.best.errors)}"
@@ -309,11 +313,11 @@ def main() -> None:
     if what not in ("calibrate", "ilc", "mpgd_gain", "table2", "table3", "critic") or (
             what in ("table2", "table3", "critic") and len(sys.argv) < 3):
         raise SystemExit("usage: tools/lab/industrial_abb.py {calibrate,ilc,mpgd_gain,table2 RUN_DIR [OUT.md],"
-                         "table3 RUN_DIR,critic CHECKPOINT}")
+                         "table3 RUN_DIR [V_MAX_FACTOR],critic CHECKPOINT}")
     from pathrl.storage import atomic_write
 
     run = {"calibrate": calibrate, "ilc": ilc, "mpgd_gain": mpgd_gain, "table2": lambda: table2(sys.argv[2]),
-           "table3": lambda: table3(sys.argv[2]),
+           "table3": lambda: table3(sys.argv[2], *map(float, sys.argv[3:4])),
            "critic": lambda: critic(sys.argv[2])}
     text = run[what]()
     if what == "critic":  # a diagnosis: printed, not written
