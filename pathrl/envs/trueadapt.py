@@ -179,6 +179,9 @@ class TrueAdaptEnv(_VecEnvBase):
         #: also keep the step's control-rate setpoints in last_step (tests, logging); off by default: checkpoints
         #: snapshot last_step, and at 4096 envs the setpoints are 8 MB
         self.record_setpoints = False
+        #: (N,) bool or None (all): envs whose ball is simulated. Evaluations clear the envs whose episode has ended:
+        #: their physics would be wasted work (a third of a PyBullet evaluation's scene steps).
+        self.simulated: Tensor | None = None
         self._obs: Tensor | None = None
         self.reset()
 
@@ -313,7 +316,7 @@ class TrueAdaptEnv(_VecEnvBase):
         q_c, v_c, a_c = interpolate_step(self.pos, self.vel, self.acc, a1, cfg.dt, self.control_steps)
         p1, v1 = end_of_step(self.pos, self.vel, self.acc, a1, cfg.dt)
         prev_xy = self.ball.xy.clone()
-        self.ball.step(q_c, v_c)
+        self.ball.step(q_c, v_c, self.simulated)
         ref1 = self.reference_at(1)
         xy = self.ball.xy
         self.ball_vel = (xy - prev_xy) / cfg.dt

@@ -58,7 +58,8 @@ def run_trajectories(env: TrueAdaptEnv, policy: Policy, batch: Tensor,
     """Run the trajectories `batch` (bank indices (n,), n <= num_envs) in envs 0..n-1 to their first ending; per
     trajectory (n,) float64 CPU values of :data:`OUTCOMES` and :data:`METRICS`. `on_step(stepped)` runs after the
     start (stepped all False) and after every step, stepped (n,) bool marking the episodes that were still running
-    in it (a recorder's hook). Envs whose episode ended keep stepping until the batch is done (autoreset off)."""
+    in it (a recorder's hook). Envs whose episode ended keep stepping until the batch is done (autoreset off),
+    their ball no longer simulated (``env.simulated``)."""
     if env.cfg.autoreset:
         raise ValueError("run_trajectories: build the env with autoreset=False")
     n = len(batch)
@@ -70,23 +71,33 @@ def run_trajectories(env: TrueAdaptEnv, policy: Policy, batch: Tensor,
     pending[ids] = True
     if on_step is not None:
         on_step(torch.zeros(n, dtype=torch.bool))
-    while bool(pending.any()):
-        with torch.no_grad():
-            env.step(policy(env))
-        if on_step is not None:
-            on_step(pending[:n].cpu())
-        done = (env.termination != TerminationReason.NONE) & pending
-        if bool(done.any()):
-            m = env.episode_metrics(done)
-            at = done[:n].nonzero().squeeze(1).cpu()
-            outcome = {"success": env.last_step["success"], "failed": env.last_step["failed"],
-                       "dev_terminated": env.termination == TerminationReason.DEVIATION}
-            for k in OUTCOMES:
-                out[k][at] = outcome[k][done].double().cpu()
-            for k in METRICS:
-                out[k][at] = m[k].double().cpu()
-            pending &= ~done
+    env.simulated = pending.clone()  # the ball of an ended episode is not simulated (its values are never read)
+    try:
+        while bool(pending.any()):
+            with torch.no_grad():
+                env.step(policy(env))
+            if on_step is not None:
+                on_step(pending[:n].cpu())
+            done = (env.termination != TerminationReason.NONE) & pending
+            if bool(done.any()):
+                _record_ended(env, done, n, out)
+                pending &= ~done
+                env.simulated = pending.clone()
+    finally:
+        env.simulated = None
     return out
+
+
+def _record_ended(env: TrueAdaptEnv, done: Tensor, n: int, out: dict[str, Tensor]) -> None:
+    """Write the outcomes and metrics of the episodes that ended in this step (done (N,) bool) into `out`."""
+    m = env.episode_metrics(done)
+    at = done[:n].nonzero().squeeze(1).cpu()
+    outcome = {"success": env.last_step["success"], "failed": env.last_step["failed"],
+               "dev_terminated": env.termination == TerminationReason.DEVIATION}
+    for k in OUTCOMES:
+        out[k][at] = outcome[k][done].double().cpu()
+    for k in METRICS:
+        out[k][at] = m[k].double().cpu()
 
 
 def evaluate(env: TrueAdaptEnv, policy: Policy, trajectories: Tensor,

@@ -137,8 +137,9 @@ class BallOnPlateScene(MotorScene):
         b = self.ball_on_plate()
         return np.array([b[0] / USABLE_HALF[0], b[1] / USABLE_HALF[1]])
 
-    def ball_is_on_plate(self) -> bool:
-        """True if the ball is within the plate's outline and near its surface."""
-        b = self.ball_on_plate()
+    def ball_is_on_plate(self, b: np.ndarray | None = None) -> bool:
+        """True if the ball (`b`: :meth:`ball_on_plate`, read now if not given) is within the plate's outline and
+        near its surface."""
+        b = self.ball_on_plate() if b is None else b
         inside = abs(b[0]) <= PLATE_SIZE[0] / 2 and abs(b[1]) <= PLATE_SIZE[1] / 2
         return bool(inside and -ON_PLATE_HEIGHT <= b[2] <= ON_PLATE_HEIGHT)

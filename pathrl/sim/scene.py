@@ -75,13 +75,18 @@ class MotorScene:
 
     def follow(self, q: np.ndarray, qd: np.ndarray) -> None:
         """Track setpoints (K, D) positions and velocities, one physics step per control period."""
-        for qk, vk in zip(np.asarray(q, dtype=float), np.asarray(qd, dtype=float), strict=True):
-            self._hold(qk, vk)
-            p.stepSimulation(physicsClientId=self.cid)
+        q, qd = np.asarray(q, dtype=float).tolist(), np.asarray(qd, dtype=float).tolist()  # (K, D) Python floats
+        body, joints, mode, cid = self.body, self.joint_ids, p.POSITION_CONTROL, self.cid
+        forces = [self.motor_force] * len(joints)
+        for qk, vk in zip(q, qd, strict=True):  # _hold, inlined: this loop is most of a PyBullet evaluation
+            p.setJointMotorControlArray(body, joints, mode, targetPositions=qk, targetVelocities=vk, forces=forces,
+                                        physicsClientId=cid)
+            p.stepSimulation(physicsClientId=cid)
 
     def _hold(self, q: np.ndarray, qd: np.ndarray) -> None:
         p.setJointMotorControlArray(self.body, self.joint_ids, p.POSITION_CONTROL,
-                                    targetPositions=[float(x) for x in q], targetVelocities=[float(x) for x in qd],
+                                    targetPositions=np.asarray(q, dtype=float).tolist(),
+                                    targetVelocities=np.asarray(qd, dtype=float).tolist(),
                                     forces=[self.motor_force] * len(self.joint_ids), physicsClientId=self.cid)
 
     def joint_positions(self) -> np.ndarray:

@@ -48,8 +48,9 @@ def _read(kind: str, scenes) -> tuple[np.ndarray, np.ndarray]:
         ok = np.zeros(len(scenes), dtype=bool)
         for i, s in enumerate(scenes):
             if s.ball is not None:
-                out[i] = s.ball_on_plate()[:2]
-                ok[i] = s.ball_is_on_plate()
+                b = s.ball_on_plate()
+                out[i] = b[:2]
+                ok[i] = s.ball_is_on_plate(b)
         return out, ok
     out = np.zeros((len(scenes), 8))
     for i, s in enumerate(scenes):
