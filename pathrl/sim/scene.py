@@ -75,19 +75,19 @@ class MotorScene:
 
     def follow(self, q: np.ndarray, qd: np.ndarray) -> None:
         """Track setpoints (K, D) positions and velocities, one physics step per control period."""
-        q, qd = np.asarray(q, dtype=float).tolist(), np.asarray(qd, dtype=float).tolist()  # (K, D) Python floats
-        body, joints, mode, cid = self.body, self.joint_ids, p.POSITION_CONTROL, self.cid
-        forces = [self.motor_force] * len(joints)
-        for qk, vk in zip(q, qd, strict=True):  # _hold, inlined: this loop is most of a PyBullet evaluation
-            p.setJointMotorControlArray(body, joints, mode, targetPositions=qk, targetVelocities=vk, forces=forces,
-                                        physicsClientId=cid)
-            p.stepSimulation(physicsClientId=cid)
+        q, qd = np.asarray(q, dtype=float).tolist(), np.asarray(qd, dtype=float).tolist()  # (K, D), once per call
+        for qk, vk in zip(q, qd, strict=True):
+            self._command(qk, vk)
+            p.stepSimulation(physicsClientId=self.cid)
 
     def _hold(self, q: np.ndarray, qd: np.ndarray) -> None:
-        p.setJointMotorControlArray(self.body, self.joint_ids, p.POSITION_CONTROL,
-                                    targetPositions=np.asarray(q, dtype=float).tolist(),
-                                    targetVelocities=np.asarray(qd, dtype=float).tolist(),
-                                    forces=[self.motor_force] * len(self.joint_ids), physicsClientId=self.cid)
+        self._command(np.asarray(q, dtype=float).tolist(), np.asarray(qd, dtype=float).tolist())
+
+    def _command(self, q: list[float], qd: list[float]) -> None:
+        """Position-control targets q and qd (D,) as Python floats (converted by the caller: this runs per setpoint)."""
+        p.setJointMotorControlArray(self.body, self.joint_ids, p.POSITION_CONTROL, targetPositions=q,
+                                    targetVelocities=qd, forces=[self.motor_force] * len(self.joint_ids),
+                                    physicsClientId=self.cid)
 
     def joint_positions(self) -> np.ndarray:
         """Measured joint positions (D,)."""

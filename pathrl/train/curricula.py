@@ -21,19 +21,23 @@ from pathrl.schema import BallCurriculumCfg, RewardCurriculumCfg
 __all__ = ["apply_ball_curriculum", "apply_reward_curriculum", "curriculum_scales", "reward_weight"]
 
 
+def _progress(it: int, iterations: int) -> float:
+    """How far iteration `it` is through a curriculum of `iterations`, clamped to [0, 1]."""
+    return min(max(it / max(iterations, 1), 0.0), 1.0)
+
+
 def curriculum_scales(it: int, cur: BallCurriculumCfg) -> tuple[float, float]:
     """(rolling-friction scale, start spread) of new balls at iteration `it` of the ball curriculum: the friction
     scale log-linear from ``cur.friction_scale`` to 1, the spread linear from ``cur.start_spread`` to 1, both reached
     at ``cur.iterations``."""
-    frac = min(max(it / max(cur.iterations, 1), 0.0), 1.0)
+    frac = _progress(it, cur.iterations)
     return cur.friction_scale ** (1.0 - frac), cur.start_spread + (1.0 - cur.start_spread) * frac
 
 
 def reward_weight(it: int, cur: RewardCurriculumCfg, final: float) -> float:
     """The weight of the curriculum's term at iteration `it`: linear from ``cur.initial`` to `final` (the reward's
     configured weight), reached at ``cur.iterations``."""
-    frac = min(max(it / max(cur.iterations, 1), 0.0), 1.0)
-    return cur.initial + (final - cur.initial) * frac
+    return cur.initial + (final - cur.initial) * _progress(it, cur.iterations)
 
 
 def apply_ball_curriculum(runner: Any, cur: BallCurriculumCfg) -> None:
