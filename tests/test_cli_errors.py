@@ -6,6 +6,7 @@ of what is tested), the others call the CLI's ``main`` in-process.
 
 from __future__ import annotations
 
+import json
 import pickle
 import shutil
 from pathlib import Path
@@ -204,3 +205,43 @@ def test_eval_on_a_fresh_checkout_uses_the_committed_test_split(tmp_path, capsys
     (model / "config.yaml").write_text(cfg)
     assert eval_cli.main([f"run_dir={model}", "episodes=2", "record=false", f"out={tmp_path / 'o'}"]) == 2
     assert "data/iiwa7/not_here" in _one_line(capsys.readouterr().err)
+
+
+def test_eval_batch_lines_skip_comments_and_refuse_a_nested_batch():
+    text = "# header\n\nrun_dir=a out='/tmp/x y'  # why\nrun_dir=b\n"
+    assert eval_cli.batch_lines(text) == [(3, ["run_dir=a", "out=/tmp/x y"]), (4, ["run_dir=b"])]
+    with pytest.raises(eval_cli.UserError, match="line 2: a batch cannot name another batch"):
+        eval_cli.batch_lines("run_dir=a\nbatch=other.txt\n")
+    with pytest.raises(eval_cli.UserError, match="line 1"):
+        eval_cli.batch_lines("run_dir='unclosed\n")
+
+
+def test_eval_batch_checks_every_line_before_any_work(tmp_path, capsys):
+    good = f"run_dir=models/tracking/iiwa7_random episodes=2 record=false out={tmp_path / 'a'}"
+    batch = tmp_path / "b.txt"
+    batch.write_text(f"{good}\nrun_dir=models/tracking/iiwa7_random num_envs=0 out={tmp_path / 'b'}\n")
+    assert eval_cli.main([f"batch={batch}"]) == 2
+    assert "batch line 2: num_envs must be >= 1" in _one_line(capsys.readouterr().err)
+    assert not (tmp_path / "a").exists()
+    batch.write_text(f"{good}\n{good}\n")
+    assert eval_cli.main([f"batch={batch}"]) == 2
+    assert "two lines write the same output directory" in _one_line(capsys.readouterr().err)
+    assert eval_cli.main([f"batch={batch}", "episodes=2"]) == 2
+    assert "takes no other arguments" in _one_line(capsys.readouterr().err)
+
+
+def test_eval_batch_runs_the_other_lines_when_one_fails(tmp_path, capsys):
+    """A damaged checkpoint fails its line only (exit code 1); the next line is evaluated, as it is alone."""
+    model = _model_copy(tmp_path)
+    _damage(model, "empty checkpoint")
+    batch = tmp_path / "b.txt"
+    args = "episodes=3 num_envs=3 record=false dataset.path=datasets/iiwa7/random"
+    batch.write_text(f"run_dir={model} {args} out={tmp_path / 'bad'}\n"
+                     f"run_dir=models/tracking/iiwa7_random {args} out={tmp_path / 'good'}\n")
+    assert eval_cli.main([f"batch={batch}"]) == 1
+    err = capsys.readouterr().err
+    assert "batch line 1: " in err and "unreadable checkpoint" in err and "1 of 2 evaluations failed" in err
+    assert not (tmp_path / "bad" / "metrics.json").exists()
+    assert eval_cli.main([*args.split(), "run_dir=models/tracking/iiwa7_random", f"out={tmp_path / 'alone'}"]) == 0
+    got, alone = (json.loads((tmp_path / d / "metrics.json").read_text()) for d in ("good", "alone"))
+    assert {k: v for k, v in got.items() if "wall" not in k} == {k: v for k, v in alone.items() if "wall" not in k}

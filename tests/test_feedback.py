@@ -124,6 +124,42 @@ def test_pybullet_pool_is_deterministic_across_workers(iiwa):
     assert not torch.equal(out[0][0][0], out[0][0][1])  # every scene draws its own ball
 
 
+def test_a_kept_pool_is_handed_on_reseeded_and_reads_as_a_fresh_one(iiwa):
+    """kept_pools: the second feedback of the same pool gets the first one's scenes (no new workers), reseeded, and
+    its episode reads exactly as on a fresh pool; outside, a closed pool stops its workers."""
+    from pathrl.sim.vec import PyBulletBall, kept_pools
+
+    q = LEVEL.expand(2, 7).clone()
+    qs = q[:, None] + 0.2 * torch.linspace(0, 1, 12, dtype=torch.float64)[None, :, None]
+
+    def episode(fb) -> tuple[torch.Tensor, torch.Tensor]:
+        fb.reset(torch.arange(2), q)
+        first = fb.observe().clone()
+        return first, fb.step(qs, torch.zeros_like(qs)).obs
+
+    fresh = PyBulletBall(iiwa, 2, seed=3, workers=1)
+    want = episode(fresh)
+    fresh.close()
+    assert fresh.pool.procs == []
+    with kept_pools():
+        a = PyBulletBall(iiwa, 2, seed=3, workers=1)
+        episode(a)
+        episode(a)  # the scenes' generators moved on
+        a.close()
+        procs = list(a.pool.procs)
+        assert procs and all(p.is_alive() for p in procs)  # kept
+        b = PyBulletBall(iiwa, 2, seed=3, workers=1)
+        assert b.pool is a.pool
+        got = episode(b)
+        other = PyBulletBall(iiwa, 2, seed=4, workers=1)  # another seed: its own pool
+        assert other.pool is not a.pool
+        other.close()
+        b.close()
+    assert not any(p.is_alive() for p in procs)  # closed on leaving
+    for x, y in zip(want, got, strict=True):
+        assert torch.equal(x, y)
+
+
 def ball_env(iiwa, num_envs=8, feedback=None, **kw) -> PathTrackingEnv:
     paths = load_pathset(ROOT_DATASET, "test", KnotStrategy("distance", 0.3, n_state=5), robot=iiwa)
     cfg = TrackingEnvCfg(num_envs=num_envs, seed=0, segments="full", episode_budget_s=6.0, scale_budget=False,

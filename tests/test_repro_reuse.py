@@ -4,6 +4,7 @@ pathrl.repro.steps)."""
 from __future__ import annotations
 
 import json
+import shlex
 from pathlib import Path
 
 import pytest
@@ -128,6 +129,31 @@ def test_evaluate_reuses_until_the_policy_changes(repo: Path, monkeypatch, capsy
     assert "inputs changed" in capsys.readouterr().out
     run()
     assert len(runs) == 2
+
+
+def test_a_batch_records_what_it_wrote_even_when_a_line_failed(tmp_path: Path, monkeypatch):
+    """evaluate_batch: one pathrl-eval batch=FILE for the jobs to do (a kept one is left out); results written are
+    recorded with their inputs, also when another line failed (StepFailed)."""
+    calls: list[list[str]] = []
+
+    def fake_sh(cmd: list[str], log: Path) -> None:
+        calls.append(cmd)
+        lines = Path(cmd[1].removeprefix("batch=")).read_text().splitlines()
+        out = Path(shlex.split(lines[0])[-1].removeprefix("out="))
+        out.mkdir(parents=True)
+        (out / "metrics.json").write_text("{}")  # the first line ran, the second failed
+        raise steps.StepFailed("exit 1: 1 of 2 evaluations failed")
+
+    monkeypatch.setattr(steps, "sh", fake_sh)
+    jobs = [steps.EvalJob([f"run_dir=m{i}", f"out={tmp_path / 'raw' / str(i)}"], tmp_path / "raw" / str(i) /
+                          "metrics.json", {}) for i in range(2)]
+    with pytest.raises(steps.StepFailed):
+        steps.evaluate_batch("t", [lambda: None, lambda: jobs[0], lambda: jobs[1]], tmp_path / "logs")
+    assert len(calls) == 1 and Path(calls[0][0]).name == "pathrl-eval"
+    assert len((tmp_path / "logs" / "batch_t.txt").read_text().splitlines()) == 2
+    assert (tmp_path / "raw" / "0" / "inputs.json").is_file() and not (tmp_path / "raw" / "1").exists()
+    steps.evaluate_batch("none", [lambda: None], tmp_path / "logs")  # nothing to do: no process
+    assert len(calls) == 1
 
 
 def test_path_change_re_evaluates_new_weights(repo: Path, monkeypatch):

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import shlex
 from pathlib import Path
 
 import pytest
@@ -132,8 +133,12 @@ def test_plan_runs_the_trueadapt_steps_through_the_family_registry(tmp_path, mon
     runs: list[list[str]] = []
 
     def fake_sh(cmd: list[str], log: Path) -> None:
+        batch = [a[6:] for a in cmd if a.startswith("batch=")]  # pathrl-eval batch=FILE: one evaluation per line
+        if batch:
+            cmd = [cmd[0], *shlex.split(Path(batch[0]).read_text())]
         runs.append(cmd)
         for out in (Path(a[4:]) for a in cmd if a.startswith("out=")):  # the evaluation's output directory
+            out = out if out.is_absolute() else steps.ROOT / out
             out.mkdir(parents=True)
             (out / "metrics.json").write_text("{}")
 
@@ -144,6 +149,7 @@ def test_plan_runs_the_trueadapt_steps_through_the_family_registry(tmp_path, mon
         step.run()
     assert len(runs) == 3 and not any("tools/" in arg for cmd in runs for arg in cmd)
     evaluation, validation, timing = runs
+    assert (tmp_path / "raw" / adapt.AdaptEval("on_plate").id / "inputs.json").is_file()  # recorded after the batch
     assert Path(evaluation[0]).name == "pathrl-eval"
     assert "run_dir=models/trueadapt/iiwa7_trueadapt_on_plate_reference" in evaluation
     for cmd, name in ((validation, "validate"), (timing, "timing")):

@@ -5,6 +5,7 @@
                 [record=true|false] [num_envs=1200]
                 [task=ball_on_plate|standing] [backend=pybullet|analytic] [compile_limits=true|false]
                 [open_loop=true|false] [checkpoint=model_K.pt] [dataset.out_of_limits=refuse|clip] [workers=N]
+    pathrl-eval batch=FILE
 
 The arguments are Hydra overrides of ``conf/eval_app.yaml`` (schema :class:`pathrl.schema.EvalAppCfg`).
 ``dataset=NAME`` is ``data/<the run's robot>/NAME`` (short for ``dataset.name=NAME``); neither ``dataset`` nor
@@ -20,6 +21,12 @@ model-based controller's directory (``models/tracking/iiwa7_ball_tray_controller
 ``episodes.mcap`` go to ``out``, by default the run directory; a shipped model's (``models/<family>/<name>``) go to
 ``runs/eval/<name>``: nothing is written inside ``models/`` unless ``write_models=true``. The output directory is
 checked before the evaluation runs.
+
+``batch=FILE`` runs many evaluations in one process: one per line of FILE, written as the arguments above (``#``
+comments and blank lines skipped). Every line is checked first (a bad one stops the batch before any work, naming
+its line); then they run in order, sharing the imports and the PyBullet ball scenes (:func:`pathrl.sim.vec.kept_pools`:
+built once per size and seed, results as if built afresh). A line that fails is reported and the others still run;
+the exit code is then 1.
 """
 
 from __future__ import annotations
@@ -32,7 +39,7 @@ from pathrl.cli.common import UserError, compose, key_value_app, output_dir, run
 from pathrl.families.tracking import OFFSET_WARN_RAD
 from pathrl.families.tracking import offset_line as _offset_line  # noqa: F401 (kept for its callers)
 
-__all__ = ["OFFSET_WARN_RAD", "main", "output_of"]
+__all__ = ["OFFSET_WARN_RAD", "BatchFailed", "batch_lines", "main", "output_of"]
 
 USAGE = "usage: " + " ".join(__doc__.split("\n\n")[1].split())
 
@@ -130,18 +137,20 @@ def _path_files_as_dataset(run_dir: Path, dataset_path: str | None) -> str | Non
     return str(as_dataset(dataset_path, robot))
 
 
-def _main(argv: list[str]) -> None:
+def _prepare(argv: list[str]) -> tuple[dict[str, Any], Path]:
+    """The checked config of `argv` and its output directory (UserError: one line)."""
+    cfg = _config(argv)
+    return cfg, output_of(cfg)
+
+
+def _evaluate(cfg: dict[str, Any], out: Path) -> None:
+    """Evaluate the run of a checked config (:func:`_prepare`) into `out` and print its report."""
     from pathrl.dataset.io import DatasetError
     from pathrl.eval.evaluate import EvalOptions
     from pathrl.families import family_of
     from pathrl.runs import RunError, load_run
 
-    if any(a in ("-h", "--help") for a in argv):
-        _print_help()
-        return
-    cfg = _config(argv)
     run_dir = Path(cfg["run_dir"])
-    out = output_of(cfg)
     dataset_path = cfg["dataset"]["path"]
     if cfg["dataset"]["name"] is not None:
         try:
@@ -163,9 +172,83 @@ def _main(argv: list[str]) -> None:
     family.step("report")(m, out, opts)
 
 
+def batch_lines(text: str) -> list[tuple[int, list[str]]]:
+    """The evaluations of a batch file's `text`: (line number, its arguments) of every line that is not blank or a
+    ``#`` comment; UserError (one line) on a line shlex cannot split or one that is itself a batch."""
+    import shlex
+
+    out = []
+    for no, line in enumerate(text.splitlines(), 1):
+        try:
+            words = shlex.split(line, comments=True)
+        except ValueError as exc:
+            raise UserError(f"batch line {no}: {exc}") from None
+        if any(w.startswith("batch=") for w in words):
+            raise UserError(f"batch line {no}: a batch cannot name another batch")
+        if words:
+            out.append((no, words))
+    return out
+
+
+def _batch(path: str) -> None:
+    """Check every evaluation of batch file `path`, then run them in one process sharing the PyBullet ball scenes;
+    a failed evaluation is reported on stderr and the others run (then exit code 1)."""
+    import sys
+
+    from pathrl.sim.vec import kept_pools
+
+    try:
+        text = Path(path).read_text()
+    except OSError as exc:
+        raise UserError(f"batch={path}: {exc.strerror or exc}") from None
+    jobs = []
+    for no, words in batch_lines(text):
+        try:
+            jobs.append((no, *_prepare(words)))
+        except UserError as exc:
+            raise UserError(f"batch line {no}: {exc}") from None
+    outs = [out.resolve() for _, _, out in jobs]
+    if len(set(outs)) < len(outs):
+        raise UserError(f"batch={path}: two lines write the same output directory")
+    failed = []
+    with kept_pools():
+        for no, cfg, out in jobs:
+            print(f"== batch line {no}: {cfg['run_dir']} -> {out}", flush=True)
+            try:
+                _evaluate(cfg, out)
+            except Exception as exc:  # noqa: BLE001 - one line per failed evaluation; the others still run
+                what = "" if isinstance(exc, UserError) else f"{type(exc).__name__}: "
+                print(f"error: batch line {no}: {what}{exc}", file=sys.stderr, flush=True)
+                failed.append(no)
+    if failed:
+        raise BatchFailed(f"{len(failed)} of {len(jobs)} evaluations failed (lines {', '.join(map(str, failed))})")
+
+
+class BatchFailed(Exception):
+    """Some evaluations of a batch failed (the others ran): exit code 1."""
+
+
+def _main(argv: list[str]) -> None:
+    if any(a in ("-h", "--help") for a in argv):
+        _print_help()
+        return
+    if any(a.startswith("batch=") for a in argv):
+        if len(argv) != 1:
+            raise UserError(f"batch=FILE takes no other arguments (they go on its lines); {USAGE}")
+        _batch(argv[0].partition("=")[2])
+        return
+    _evaluate(*_prepare(argv))
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of ``pathrl-eval key=value ...`` (argv: sys.argv[1:]); returns the exit code."""
-    return run_cli(_main, argv)
+    import sys
+
+    try:
+        return run_cli(_main, argv)
+    except BatchFailed as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 1
 
 
 if __name__ == "__main__":

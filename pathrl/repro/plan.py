@@ -2,7 +2,8 @@
 selected rows, in phases, each evaluation and baseline once even when several table rows use it.
 
 Phases run in order (:data:`PHASES`); the steps of a phase in :data:`CONCURRENT` run ``--jobs`` at a time
-(independent evaluations, one process each), the others one at a time: trainings (never two on 2 cores) and the
+(independent evaluations: one process per evaluation, or per batch of them sharing its imports and PyBullet scenes;
+baselines), the others one at a time: trainings (never two on 2 cores) and the
 real-time measurements (they time computation, so they run on an otherwise idle machine).
 """
 
@@ -16,10 +17,14 @@ from pathrl.repro import trueadapt as adapt
 from pathrl.repro.layout import ROOT, Layout, Profile
 from pathrl.repro.tables import PATH_CHANGE, REALTIME, ROWS, SWEEPS, baselines, evaluations, select
 
-__all__ = ["CONCURRENT", "PHASES", "Plan", "Step", "build_plan", "check_only"]
+__all__ = ["BATCH", "CONCURRENT", "PHASES", "Plan", "Step", "build_plan", "check_only"]
 
 PHASES = ("prepare", "evaluate", "timing")
 CONCURRENT = {"evaluate"}
+
+#: Evaluations per ``pathrl-eval batch=FILE`` process (:func:`pathrl.repro.steps.evaluate_batch`): enough to share
+#: the imports and the PyBullet ball scenes, few enough that the ``--jobs`` lanes stay balanced.
+BATCH = 9
 
 
 @dataclass
@@ -67,10 +72,19 @@ def build_plan(profile: Profile, lay: Layout, only: set[str] | None, train: bool
     plan = Plan()
     if train:
         _training_steps(plan, profile, lay, evals, reuse)
-    # The simulated (PyBullet) evaluations, the longest steps, first: the concurrent phase then ends with
-    # short steps on every lane.
-    for e in sorted(evals, key=lambda e: not e.task):
+    # The longest steps first (the TrueAdapt batches, the standing robots in PyBullet): the concurrent phase then
+    # ends with short steps on every lane.
+    _trueadapt_evaluations(plan, profile, lay, only, reuse)
+    for e in (e for e in evals if e.task == "standing"):  # a standing scene is never kept: one process each
         plan.add("evaluate", f"evaluate {e.id}", lambda e=e: steps.evaluate(e, profile, lay, reuse, logs))
+    ball = [e for e in evals if e.task == "ball_on_plate"]
+    plain = [e for e in evals if e.task is None]
+    for name, group in (("ball", ball), ("tracking", plain)):
+        for k, chunk in enumerate(_chunks(group, BATCH)):
+            makers = [lambda e=e: steps.eval_job(e, profile, lay, reuse) for e in chunk]
+            label = f"{name}_{k + 1}"
+            plan.add("evaluate", f"evaluate {len(chunk)} ({label}: {chunk[0].id} ...)",
+                     lambda label=label, makers=makers: steps.evaluate_batch(label, makers, logs))
     toppra_workers = 1 if jobs > 1 else 2
     for b in baselines(select(only)):
         plan.add("evaluate", f"TOPP-RA {b.robot}/{b.dataset} ({b.segments})",
@@ -99,12 +113,25 @@ def _training_steps(plan: Plan, profile: Profile, lay: Layout, evals: list, reus
                                                                                            logs))
 
 
+def _chunks(items: list, size: int) -> list[list]:
+    """`items` in consecutive chunks of at most `size`."""
+    return [items[i:i + size] for i in range(0, len(items), size)]
+
+
+def _trueadapt_evaluations(plan: Plan, profile: Profile, lay: Layout, only: set[str] | None, reuse: bool) -> None:
+    """The TrueAdapt paper's Table I (the ball in PyBullet): ``pathrl-eval`` batches of :data:`BATCH` evaluations."""
+    logs = lay.out / "logs"
+    for k, chunk in enumerate(_chunks(adapt.evaluations(only), BATCH)):
+        makers = [lambda a=a: steps.adapt_job(a, profile, lay, reuse) for a in chunk]
+        label = f"trueadapt_{k + 1}"
+        plan.add("evaluate", f"evaluate {len(chunk)} ({label}: {chunk[0].id} ...)",
+                 lambda label=label, makers=makers: steps.evaluate_batch(label, makers, logs))
+
+
 def _trueadapt_steps(plan: Plan, profile: Profile, lay: Layout, only: set[str] | None, reuse: bool) -> None:
-    """The TrueAdapt paper's Table I (the ball in PyBullet), then its limit validation and time per decision: the
-    TrueAdapt family's registry steps (evaluate through ``pathrl-eval``, validate, timing)."""
+    """The TrueAdapt table's limit validation and time per decision: the TrueAdapt family's registry steps
+    (validate, timing; its evaluations: :func:`_trueadapt_evaluations`)."""
     logs, raw = lay.out / "logs", lay.out / "raw"
-    for a in adapt.evaluations(only):
-        plan.add("evaluate", f"evaluate {a.id}", lambda a=a: steps.adapt_evaluate(a, profile, lay, reuse, logs))
     if only is None or adapt.VALIDATION_ID in only:
         n = 1000 if profile.name == "quick" else 100_000
         plan.add("evaluate", "TrueAdapt limit validation", lambda: steps.adapt_step(

@@ -1,8 +1,9 @@
 """The steps of a reproduction (:mod:`pathrl.repro.plan`): each runs one of the project's commands in the checkout,
 its console output in ``<out>/logs/<step>.log``, and skips what ``--reuse`` keeps.
 
-Evaluations run ``pathrl-eval`` (every task family: :mod:`pathrl.families`), TOPP-RA ``pathrl-toppra``, the
-motion-profile tables ``pathrl-industrial``; the TrueAdapt table's limit validation and time per decision run the
+Evaluations run ``pathrl-eval`` (every task family: :mod:`pathrl.families`), one per step or several in one
+``pathrl-eval batch=FILE`` process (:func:`evaluate_batch`: the imports and PyBullet ball scenes built once),
+TOPP-RA ``pathrl-toppra``, the motion-profile tables ``pathrl-industrial``; the TrueAdapt table's limit validation and time per decision run the
 TrueAdapt family's registry steps (``python -m pathrl.cli.family_step``). A result records the SHA-256 of what it was
 made from (:mod:`pathrl.repro.inputs`): ``--reuse`` re-evaluates a result whose inputs changed.
 """
@@ -10,9 +11,12 @@ made from (:mod:`pathrl.repro.inputs`): ``--reuse`` re-evaluates a result whose 
 from __future__ import annotations
 
 import os
+import shlex
 import subprocess
 import sys
-from dataclasses import replace
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import yaml
@@ -23,9 +27,9 @@ from pathrl.repro.inputs import fingerprint, record, stale
 from pathrl.repro.layout import ROOT, Layout, Profile, rel
 from pathrl.repro.tables import CONTROLLER_MODELS, WARM_STARTS, Baseline, Evaluation, warm_chain
 
-__all__ = ["BIN", "INDUSTRIAL", "StepFailed", "adapt_evaluate", "adapt_step", "dataset_seed", "evaluate", "industrial",
-           "kept", "path_change", "path_change_file", "program", "realtime", "sh", "shipped", "tiny_dataset",
-           "toppra", "train_and_ship", "training_jobs"]
+__all__ = ["BIN", "INDUSTRIAL", "EvalJob", "StepFailed", "adapt_evaluate", "adapt_job", "adapt_step", "dataset_seed",
+           "eval_job", "evaluate", "evaluate_batch", "industrial", "kept", "path_change", "path_change_file", "program",
+           "realtime", "sh", "shipped", "tiny_dataset", "toppra", "train_and_ship", "training_jobs"]
 
 #: The project's console scripts (pathrl-eval, pathrl-toppra, ...): beside the Python running this.
 BIN = Path(sys.executable).parent
@@ -71,30 +75,79 @@ def shipped(e: Evaluation, lay: Layout) -> bool:
     return (model / "model.pt").is_file() or any(model.glob("model_*.pt")) or controller
 
 
-def evaluate(e: Evaluation, profile: Profile, lay: Layout, reuse: bool, logs: Path) -> None:
-    """``pathrl-eval`` of a shipped policy on its test split into ``raw/<id>/``, its inputs recorded beside it."""
+@dataclass(frozen=True)
+class EvalJob:
+    """One ``pathrl-eval`` of a step: its arguments (key=value), its ``metrics.json`` and the inputs it records."""
+
+    args: list[str]
+    result: Path
+    inputs: dict[str, str]
+
+
+def eval_job(e: Evaluation, profile: Profile, lay: Layout, reuse: bool) -> EvalJob | None:
+    """The ``pathrl-eval`` of a shipped policy on its test split into ``raw/<id>/`` (None: not shipped, or kept)."""
     model = model_path(e.model, lay.models)
     raw = lay.out / "raw" / e.id
     if not shipped(e, lay):
-        return
+        return None
     # the model's files, those of the policy its controller config names, and the test split (pathrl/repro/inputs.py);
     # a result without recorded inputs (made before they were recorded) is kept, its next evaluation records them
     inputs = fingerprint(ROOT, model, lay.test_data / e.data_robot / e.test_dir)
     if kept(raw / "metrics.json", inputs, reuse, e.id):
-        return
+        return None
     data = rel(lay.test_data / e.data_robot / e.test_dir)
-    cmd = [str(BIN / "pathrl-eval"), f"run_dir={rel(model)}", f"dataset.path={data}",
-           f"segments={e.segments}", "seed=0", f"out={raw}"]  # eager limits (pathrl-eval's default: faster here)
+    args = [f"run_dir={rel(model)}", f"dataset.path={data}", f"segments={e.segments}", "seed=0",
+            f"out={raw}"]  # eager limits (pathrl-eval's default: faster here)
     if profile.episodes is not None:
-        cmd.append(f"episodes={profile.episodes}")
+        args.append(f"episodes={profile.episodes}")
     elif e.episodes is not None:
-        cmd.append(f"episodes={e.episodes}")
+        args.append(f"episodes={e.episodes}")
     if e.task:
-        cmd += [f"task={e.task}", "backend=pybullet"]
+        args += [f"task={e.task}", "backend=pybullet"]
     if e.open_loop:
-        cmd.append("open_loop=true")
-    sh(cmd, logs / f"eval_{e.id}.log")
-    record(raw / "metrics.json", inputs)
+        args.append("open_loop=true")
+    return EvalJob(args, raw / "metrics.json", inputs)
+
+
+def adapt_job(a: adapt.AdaptEval, profile: Profile, lay: Layout, reuse: bool) -> EvalJob | None:
+    """A TrueAdapt evaluation (``pathrl-eval`` of its model directory; None: the model or the split is missing, or
+    the result is kept)."""
+    result = lay.out / "raw" / a.id / "metrics.json"
+    data = ROOT / ("datasets" if a.split == "test" else "data") / adapt.ROBOT / a.dataset
+    inputs = fingerprint(ROOT, model_path(a.run), data)
+    cmd = adapt.eval_command(a, ROOT, lay.out / "raw", profile.episodes or adapt.EPISODES,
+                             kept(result, inputs, reuse, a.id))
+    return None if cmd is None else EvalJob(cmd[1:], result, inputs)
+
+
+def _run_one(job: EvalJob | None, log: Path) -> None:
+    if job is not None:
+        sh(program(["pathrl-eval", *job.args]), log)
+        record(job.result, job.inputs)
+
+
+def evaluate(e: Evaluation, profile: Profile, lay: Layout, reuse: bool, logs: Path) -> None:
+    """``pathrl-eval`` of a shipped policy on its test split into ``raw/<id>/``, its inputs recorded beside it."""
+    _run_one(eval_job(e, profile, lay, reuse), logs / f"eval_{e.id}.log")
+
+
+def evaluate_batch(name: str, jobs: list[Callable[[], EvalJob | None]], logs: Path) -> None:
+    """The evaluations `jobs` make (each called now: what is kept is decided when the step runs) in one
+    ``pathrl-eval batch=FILE`` process (shared imports and PyBullet ball scenes); every result written is recorded
+    with its inputs, also when another line of the batch failed (then StepFailed)."""
+    todo = [j for make in jobs if (j := make()) is not None]
+    if not todo:
+        return
+    logs.mkdir(parents=True, exist_ok=True)
+    batch = logs / f"batch_{name}.txt"
+    batch.write_text("".join(shlex.join(j.args) + "\n" for j in todo))
+    start = time.time()
+    try:
+        sh(program(["pathrl-eval", f"batch={batch}"]), logs / f"batch_{name}.log")
+    finally:
+        for j in todo:
+            if j.result.is_file() and j.result.stat().st_mtime >= start:
+                record(j.result, j.inputs)
 
 
 def toppra(b: Baseline, profile: Profile, lay: Layout, reuse: bool, logs: Path, workers: int) -> None:
@@ -134,16 +187,8 @@ def industrial(lay: Layout, reuse: bool, logs: Path) -> None:
 
 
 def adapt_evaluate(a: adapt.AdaptEval, profile: Profile, lay: Layout, reuse: bool, logs: Path) -> None:
-    """A TrueAdapt evaluation (``pathrl-eval`` of its model directory; skipped when the model or the split is
-    missing), its inputs recorded beside it."""
-    result = lay.out / "raw" / a.id / "metrics.json"
-    data = ROOT / ("datasets" if a.split == "test" else "data") / adapt.ROBOT / a.dataset
-    inputs = fingerprint(ROOT, model_path(a.run), data)
-    cmd = adapt.eval_command(a, ROOT, lay.out / "raw", profile.episodes or adapt.EPISODES,
-                             kept(result, inputs, reuse, a.id))
-    if cmd is not None:
-        sh(program(cmd), logs / f"eval_{a.id}.log")
-        record(result, inputs)
+    """A TrueAdapt evaluation (:func:`adapt_job`), its inputs recorded beside it."""
+    _run_one(adapt_job(a, profile, lay, reuse), logs / f"eval_{a.id}.log")
 
 
 def adapt_step(cmd: list[str] | None, log: Path) -> None:

@@ -90,6 +90,10 @@ class BallOnPlateScene(MotorScene):
         self.ball_params: BallParams | None = None
 
     # ------------------------------------------------------------------ episode
+    def reseed(self, seed: int) -> None:
+        """Draw the next balls and placements as a scene built with `seed` does."""
+        self.rng = np.random.default_rng(seed)
+
     def reset(self, q: np.ndarray, ball_xy: tuple[float, float] | None = None,
               ball: BallParams | None = None) -> BallParams:
         """Pose the robot at rest at `q` (D,), put a new ball on the plate at `ball_xy` (plate frame, m;

@@ -8,12 +8,19 @@ seeded with ``seed + i``, so results do not depend on the number of workers.
 * :class:`PyBulletBall`: iiwa with a plate and a ball (:mod:`pathrl.sim.ball_plate`).
 * :class:`PyBulletStanding`: free-standing ARMAR-4 (:mod:`pathrl.sim.humanoid`); its torch twin for training is
   :class:`pathrl.sim.standing.AnalyticStanding` (same observation).
+
+Building the scenes is a fifth of a ball evaluation's time (250 iiwa scenes: ~16 s). Inside :func:`kept_pools`, a
+closed ball pool is kept and handed to the next feedback of the same robot, size, rate, seed and workers, its scenes
+reseeded, so evaluations run one after another in one process (``pathrl-eval batch=FILE``) build their scenes
+once; the results are those of a fresh pool (tests/test_sim_vec.py).
 """
 
 from __future__ import annotations
 
 import math
 import multiprocessing as mp
+from collections.abc import Iterator
+from contextlib import contextmanager
 from multiprocessing.connection import Connection
 from typing import NoReturn
 
@@ -26,7 +33,7 @@ from pathrl.robot.model import RobotSpec
 from pathrl.sim.feedback import USABLE_HALF, FeedbackStep, PlateDrive, PlateIMU, ball_observation
 from pathrl.sim.standing import BASE_POS_SCALE, FALL_TILT_RAD, standing_observation, standing_values
 
-__all__ = ["BASE_POS_SCALE", "PyBulletBall", "PyBulletStanding", "ScenePool"]
+__all__ = ["BASE_POS_SCALE", "PyBulletBall", "PyBulletStanding", "ScenePool", "kept_pools"]
 
 
 def _make_scene(kind: str, robot: RobotSpec, seed: int, control_rate: float):
@@ -90,6 +97,10 @@ def _worker(conn: Connection, kind: str, robot: RobotSpec, first: int, count: in
                 for i, qs, vs in zip(local, q, qd, strict=True):
                     scenes[i].follow(qs, vs)
                 conn.send(_read(kind, scenes))
+            elif cmd == "reseed":
+                for i, s in enumerate(scenes):
+                    s.reseed(args[0] + first + i)
+                conn.send(("ready",))
             elif cmd == "close":
                 break
     finally:
@@ -98,10 +109,16 @@ def _worker(conn: Connection, kind: str, robot: RobotSpec, first: int, count: in
         conn.close()
 
 
+def _key(kind: str, robot: RobotSpec, num_envs: int, control_rate: float, seed: int, workers: int) -> tuple:
+    """What makes two pools interchangeable (:func:`kept_pools`)."""
+    return kind, repr(robot), int(num_envs), float(control_rate), int(seed), int(workers)
+
+
 class ScenePool:
     """`num_envs` scenes of one kind over `workers` processes; readings come back as tensors."""
 
     def __init__(self, kind: str, robot: RobotSpec, num_envs: int, control_rate: float, seed: int, workers: int):
+        self.key = _key(kind, robot, num_envs, control_rate, seed, workers)
         workers = max(1, min(int(workers), num_envs))
         bounds = np.linspace(0, num_envs, workers + 1).round().astype(int)
         self.blocks = [(int(a), int(b)) for a, b in zip(bounds[:-1], bounds[1:], strict=True)]
@@ -167,6 +184,13 @@ class ScenePool:
             self._send(c, ("step", local.tolist(), qn[a:b][local], vn[a:b][local]))
         return self._gather()
 
+    def reseed(self, seed: int) -> None:
+        """Scene ``i`` draws from ``seed + i`` again, as a fresh pool's (a ball scene: its random balls)."""
+        for c in self.conns:
+            self._send(c, ("reseed", int(seed)))
+        for c in self.conns:
+            self._recv(c)
+
     def close(self) -> None:
         """Stop the worker processes (asked to close, killed after 10 s); safe to call twice."""
         for c in self.conns:
@@ -185,6 +209,40 @@ class ScenePool:
             self.close()
 
 
+#: The pools kept by :func:`kept_pools` (None: outside it, a closed pool stops its workers), by :attr:`ScenePool.key`.
+_KEPT: dict[tuple, ScenePool] | None = None
+
+#: The scene kinds whose pools are kept: a ball scene's reset removes the ball and re-poses the fixed-base robot, so
+#: a kept scene starts an episode as a fresh one does. A standing robot keeps its ground contacts across resets.
+_KEEPABLE = ("ball_on_plate",)
+
+
+@contextmanager
+def kept_pools() -> Iterator[None]:
+    """Within: a closed feedback's pool (of a kind in :data:`_KEEPABLE`) is kept, and the next feedback asking for
+    the same pool (kind, robot, size, rate, seed, workers) gets it reseeded instead of building its scenes again;
+    every kept pool is closed on exit."""
+    global _KEPT
+    outer, _KEPT = _KEPT, {} if _KEPT is None else _KEPT
+    try:
+        yield
+    finally:
+        if outer is None:
+            for pool in _KEPT.values():
+                pool.close()
+            _KEPT = None
+
+
+def _pool(kind: str, robot: RobotSpec, num_envs: int, control_rate: float, seed: int, workers: int) -> ScenePool:
+    """A kept pool of that key, reseeded (:func:`kept_pools`), else a new one."""
+    key = _key(kind, robot, num_envs, control_rate, seed, workers)
+    pool = _KEPT.pop(key, None) if _KEPT is not None else None
+    if pool is None:
+        return ScenePool(kind, robot, num_envs, control_rate, seed, workers)
+    pool.reseed(seed)
+    return pool
+
+
 class _PooledFeedback:
     """Sensor feedback of `num_envs` PyBullet scenes of `kind` held by a :class:`ScenePool`; `ok` (num_envs,) bool."""
 
@@ -192,11 +250,14 @@ class _PooledFeedback:
 
     def __init__(self, robot: RobotSpec, num_envs: int, control_rate: float = 240.0, seed: int = 0,
                  workers: int = 2):
-        self.pool = ScenePool(self.kind, robot, num_envs, control_rate, seed, workers)
+        self.pool = _pool(self.kind, robot, num_envs, control_rate, seed, workers)
         self.ok = torch.zeros(num_envs, dtype=torch.bool)
 
     def close(self) -> None:
-        """Stop the pool's workers."""
+        """Stop the pool's workers, or inside :func:`kept_pools` keep them for the next feedback of the same pool."""
+        if _KEPT is not None and self.kind in _KEEPABLE and self.pool.conns and self.pool.key not in _KEPT:
+            _KEPT[self.pool.key] = self.pool
+            return
         self.pool.close()
 
 
