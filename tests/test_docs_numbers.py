@@ -713,7 +713,7 @@ RECEIPTS += [
     R(RES, "1-4 s into a test path", raw("path_change_iiwa7_random.json", "switch_range_s.0"),
       raw("path_change_iiwa7_random.json", "switch_range_s.1")),
     R(RES, "Over 200 changes per robot and kind of branch, the policy takes them with 0 limit violations, re-plans in\n"
-           "9-14 ms, and from 2 s after the change",
+           "5-7 ms, and from 2 s after the change",
       pc("iiwa7", "gentle", "episodes"),
       hi(*[pc(r, v, "limit_violations") for r in ("iiwa7", "armar6") for v in ("none", "gentle", "sharp")]),
       lo(*[pc(r, v, "replan_ms_mean") for r in ("iiwa7", "armar6") for v in ("none", "gentle", "sharp")]),
