@@ -45,7 +45,7 @@ class Command:
     argv: tuple[str, ...]
 
 
-class _Parsed(Exception):
+class _Parsed(BaseException):  # not an Exception: a batch reports those per line and goes on
     """Raised by the stubs: the CLI got past its argument and config checks."""
 
 
