@@ -224,3 +224,18 @@ def test_path_changes_keep_every_limit_and_reach_the_end(follower, test_knots):
     rows = toppra_replan(follower, test_knots, 3, seed=1)
     assert [r["switch_s"] for r in rows] == pytest.approx([e.switch_s for e in eps])  # the same changes
     assert all(r["status"] == "ok" and r["violations"] == 0 for r in rows)
+
+
+def test_the_path_change_benchmark_runs_end_to_end(tmp_path):
+    """`python -m pathrl.eval.path_change` (a `make reproduce-tables` step) on 3 test paths: every variant measured,
+    0 limit violations of the learned follower (its branches clipped into the range, never refused)."""
+    import json
+
+    from pathrl.eval.path_change import main
+
+    out = tmp_path / "pc.json"
+    main(["models/tracking/iiwa7_random", "datasets/iiwa7/random", str(out), "--episodes", "3"])
+    res = json.loads(out.read_text())
+    assert list(res["variants"]) == ["none", "gentle", "sharp"]
+    for v in res["variants"].values():
+        assert v["episodes"] == 3 and v["limit_violations"] == 0 and v["reached_end_pct"] == 100.0
