@@ -185,7 +185,8 @@ def test_trueadapt_evaluation_records_its_inputs(tmp_path: Path, monkeypatch):
     recorded, then kept."""
     runs: list[list[str]] = []
 
-    def fake_sh(cmd: list[str], log: Path) -> None:
+    def fake_sh(cmd: list[str], log: Path) -> None:  # pathrl-eval batch=FILE: the plan's TrueAdapt step
+        cmd = [cmd[0], *shlex.split(Path(cmd[1].removeprefix("batch=")).read_text())]
         runs.append(cmd)
         out = Path(next(a for a in cmd if a.startswith("out="))[4:])
         out = out if out.is_absolute() else steps.ROOT / out
@@ -197,7 +198,7 @@ def test_trueadapt_evaluation_records_its_inputs(tmp_path: Path, monkeypatch):
     lay = Layout(tmp_path, tmp_path / "models", tmp_path / "runs", tmp_path / "datasets", tmp_path / "data")
     a = adapt.AdaptEval("on_plate")
     for _ in range(2):
-        steps.adapt_evaluate(a, PROFILES["quick"], lay, True, tmp_path / "logs")
+        steps.evaluate_batch("t", [lambda: steps.adapt_job(a, PROFILES["quick"], lay, True)], tmp_path / "logs")
     files = json.loads((tmp_path / "raw" / a.id / "inputs.json").read_text())["files"]
     assert len(runs) == 1 and Path(runs[0][0]).name == "pathrl-eval" and not any("tools/" in x for x in runs[0])
     assert sorted(files) == ["datasets/iiwa7/trueadapt_on_plate/dataset.json",

@@ -190,6 +190,10 @@ def batch_lines(text: str) -> list[tuple[int, list[str]]]:
     return out
 
 
+class BatchFailed(Exception):
+    """Some evaluations of a batch failed (the others ran): exit code 1."""
+
+
 def _batch(path: str) -> None:
     """Check every evaluation of batch file `path`, then run them in one process sharing the PyBullet ball scenes;
     a failed evaluation is reported on stderr and the others run (then exit code 1)."""
@@ -222,10 +226,6 @@ def _batch(path: str) -> None:
                 failed.append(no)
     if failed:
         raise BatchFailed(f"{len(failed)} of {len(jobs)} evaluations failed (lines {', '.join(map(str, failed))})")
-
-
-class BatchFailed(Exception):
-    """Some evaluations of a batch failed (the others ran): exit code 1."""
 
 
 def _main(argv: list[str]) -> None:

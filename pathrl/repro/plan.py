@@ -11,6 +11,8 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
 
 from pathrl.repro import steps
 from pathrl.repro import trueadapt as adapt
@@ -77,14 +79,9 @@ def build_plan(profile: Profile, lay: Layout, only: set[str] | None, train: bool
     _trueadapt_evaluations(plan, profile, lay, only, reuse)
     for e in (e for e in evals if e.task == "standing"):  # a standing scene is never kept: one process each
         plan.add("evaluate", f"evaluate {e.id}", lambda e=e: steps.evaluate(e, profile, lay, reuse, logs))
-    ball = [e for e in evals if e.task == "ball_on_plate"]
-    plain = [e for e in evals if e.task is None]
-    for name, group in (("ball", ball), ("tracking", plain)):
-        for k, chunk in enumerate(_chunks(group, BATCH)):
-            makers = [lambda e=e: steps.eval_job(e, profile, lay, reuse) for e in chunk]
-            label = f"{name}_{k + 1}"
-            plan.add("evaluate", f"evaluate {len(chunk)} ({label}: {chunk[0].id} ...)",
-                     lambda label=label, makers=makers: steps.evaluate_batch(label, makers, logs))
+    for name, task in (("ball", "ball_on_plate"), ("tracking", None)):
+        _batches(plan, name, [e for e in evals if e.task == task],
+                 lambda e: steps.eval_job(e, profile, lay, reuse), logs)
     toppra_workers = 1 if jobs > 1 else 2
     for b in baselines(select(only)):
         plan.add("evaluate", f"TOPP-RA {b.robot}/{b.dataset} ({b.segments})",
@@ -113,19 +110,20 @@ def _training_steps(plan: Plan, profile: Profile, lay: Layout, evals: list, reus
                                                                                            logs))
 
 
-def _chunks(items: list, size: int) -> list[list]:
-    """`items` in consecutive chunks of at most `size`."""
-    return [items[i:i + size] for i in range(0, len(items), size)]
+def _batches(plan: Plan, name: str, items: list, job: Callable[[Any], steps.EvalJob | None], logs: Path) -> None:
+    """One evaluate step per :data:`BATCH` consecutive `items` (each with an ``id``), labelled ``<name>_<k>``: their
+    ``job(item)`` in one ``pathrl-eval batch=FILE`` process (:func:`pathrl.repro.steps.evaluate_batch`)."""
+    for k in range(0, len(items), BATCH):
+        chunk, label = items[k:k + BATCH], f"{name}_{k // BATCH + 1}"
+        makers = [lambda item=item: job(item) for item in chunk]
+        plan.add("evaluate", f"evaluate {len(chunk)} ({label}: {chunk[0].id} ...)",
+                 lambda label=label, makers=makers: steps.evaluate_batch(label, makers, logs))
 
 
 def _trueadapt_evaluations(plan: Plan, profile: Profile, lay: Layout, only: set[str] | None, reuse: bool) -> None:
     """The TrueAdapt paper's Table I (the ball in PyBullet): ``pathrl-eval`` batches of :data:`BATCH` evaluations."""
-    logs = lay.out / "logs"
-    for k, chunk in enumerate(_chunks(adapt.evaluations(only), BATCH)):
-        makers = [lambda a=a: steps.adapt_job(a, profile, lay, reuse) for a in chunk]
-        label = f"trueadapt_{k + 1}"
-        plan.add("evaluate", f"evaluate {len(chunk)} ({label}: {chunk[0].id} ...)",
-                 lambda label=label, makers=makers: steps.evaluate_batch(label, makers, logs))
+    _batches(plan, "trueadapt", adapt.evaluations(only), lambda a: steps.adapt_job(a, profile, lay, reuse),
+             lay.out / "logs")
 
 
 def _trueadapt_steps(plan: Plan, profile: Profile, lay: Layout, only: set[str] | None, reuse: bool) -> None:

@@ -3,9 +3,10 @@ its console output in ``<out>/logs/<step>.log``, and skips what ``--reuse`` keep
 
 Evaluations run ``pathrl-eval`` (every task family: :mod:`pathrl.families`), one per step or several in one
 ``pathrl-eval batch=FILE`` process (:func:`evaluate_batch`: the imports and PyBullet ball scenes built once),
-TOPP-RA ``pathrl-toppra``, the motion-profile tables ``pathrl-industrial``; the TrueAdapt table's limit validation and time per decision run the
-TrueAdapt family's registry steps (``python -m pathrl.cli.family_step``). A result records the SHA-256 of what it was
-made from (:mod:`pathrl.repro.inputs`): ``--reuse`` re-evaluates a result whose inputs changed.
+TOPP-RA ``pathrl-toppra``, the motion-profile tables ``pathrl-industrial``; the TrueAdapt table's limit validation
+and time per decision run the TrueAdapt family's registry steps (``python -m pathrl.cli.family_step``). A result
+records the SHA-256 of what it was made from (:mod:`pathrl.repro.inputs`): ``--reuse`` re-evaluates a result whose
+inputs changed.
 """
 
 from __future__ import annotations
@@ -27,7 +28,7 @@ from pathrl.repro.inputs import fingerprint, record, stale
 from pathrl.repro.layout import ROOT, Layout, Profile, rel
 from pathrl.repro.tables import CONTROLLER_MODELS, WARM_STARTS, Baseline, Evaluation, warm_chain
 
-__all__ = ["BIN", "INDUSTRIAL", "EvalJob", "StepFailed", "adapt_evaluate", "adapt_job", "adapt_step", "dataset_seed",
+__all__ = ["BIN", "INDUSTRIAL", "EvalJob", "StepFailed", "adapt_job", "adapt_step", "dataset_seed",
            "eval_job", "evaluate", "evaluate_batch", "industrial", "kept", "path_change", "path_change_file", "program",
            "realtime", "sh", "shipped", "tiny_dataset", "toppra", "train_and_ship", "training_jobs"]
 
@@ -121,6 +122,7 @@ def adapt_job(a: adapt.AdaptEval, profile: Profile, lay: Layout, reuse: bool) ->
 
 
 def _run_one(job: EvalJob | None, log: Path) -> None:
+    """Run `job` alone (None: nothing to do) and record its inputs."""
     if job is not None:
         sh(program(["pathrl-eval", *job.args]), log)
         record(job.result, job.inputs)
@@ -184,11 +186,6 @@ def industrial(lay: Layout, reuse: bool, logs: Path) -> None:
             continue
         shown = rel(out)  # as the table's "Measured with" line
         sh([str(BIN / "pathrl-industrial"), command, *overrides, f"{key}={shown}"], logs / f"industrial_{out.stem}.log")
-
-
-def adapt_evaluate(a: adapt.AdaptEval, profile: Profile, lay: Layout, reuse: bool, logs: Path) -> None:
-    """A TrueAdapt evaluation (:func:`adapt_job`), its inputs recorded beside it."""
-    _run_one(adapt_job(a, profile, lay, reuse), logs / f"eval_{a.id}.log")
 
 
 def adapt_step(cmd: list[str] | None, log: Path) -> None:

@@ -12,7 +12,7 @@ seeded with ``seed + i``, so results do not depend on the number of workers.
 Building the scenes is a fifth of a ball evaluation's time (250 iiwa scenes: ~16 s). Inside :func:`kept_pools`, a
 closed ball pool is kept and handed to the next feedback of the same robot, size, rate, seed and workers, its scenes
 reseeded, so evaluations run one after another in one process (``pathrl-eval batch=FILE``) build their scenes
-once; the results are those of a fresh pool (tests/test_sim_vec.py).
+once; the results are those of a fresh pool (tests/test_feedback.py).
 """
 
 from __future__ import annotations
