@@ -326,6 +326,51 @@ def test_warm_start_onto_more_joints_keeps_the_policy_and_holds_the_new_joints()
         input_columns(joint_rows(["b", "c"], ["a", "b", "c"]), 3, 11, 12)
 
 
+def _critic(num_obs: int):
+    from rsl_rl.models import MLPModel
+
+    obs = TensorDict({"policy": torch.zeros(1, num_obs)}, batch_size=[1])
+    return MLPModel(obs, {"critic": ["policy"]}, "critic", 1, [16, 8], "elu", True)
+
+
+class _Alg:
+    """Stand-in for PPO in a warm start: its critic (`critic_obs` inputs) and what ``load`` received."""
+
+    def __init__(self, critic_obs: int) -> None:
+        self._raw_critic = _critic(critic_obs)
+        self.loaded: dict = {}
+
+    def load(self, state: dict, cfg: dict, strict: bool) -> bool:
+        self.loaded = {"state": state, "cfg": cfg}
+        self._raw_critic.load_state_dict(state["critic_state_dict"], strict=strict)
+        return False
+
+
+def test_warm_start_of_an_asymmetric_critic_keeps_its_privileged_inputs(tmp_path):
+    """A source whose critic sees 11 policy inputs + 2 privileged ones starts a run of the same layout unchanged (its
+    critic is not cut to the policy's 11 inputs); a source with a plain critic gets the 2 new inputs at zero weight."""
+    from pathrl.storage.checkpoints import save_checkpoint
+    from pathrl.train.warm_start import warm_start
+
+    torch.manual_seed(0)
+    actor, critic = _actor(11, 2), _critic(13)
+    save_checkpoint({"actor_state_dict": actor.state_dict(), "critic_state_dict": critic.state_dict()},
+                    tmp_path / "asym.pt")
+    alg = _Alg(13)
+    warm_start(alg, tmp_path / "asym.pt", 11, 0.05)
+    got = alg.loaded["state"]["critic_state_dict"]
+    torch.testing.assert_close(got["mlp.0.weight"], critic.state_dict()["mlp.0.weight"])
+    assert alg.loaded["state"]["actor_state_dict"]["mlp.0.weight"].shape == (16, 11)
+    save_checkpoint({"actor_state_dict": actor.state_dict(), "critic_state_dict": _critic(11).state_dict()},
+                    tmp_path / "plain.pt")
+    alg = _Alg(13)
+    warm_start(alg, tmp_path / "plain.pt", 11, 0.05)
+    w = alg.loaded["state"]["critic_state_dict"]["mlp.0.weight"]
+    assert w.shape == (16, 13) and w[:, 11:].abs().max() == 0.0
+    with pytest.raises(WarmStartError, match="13 inputs, the new env only 11"):
+        warm_start(_Alg(11), tmp_path / "asym.pt", 11, 0.05)
+
+
 class _SlidingPlate:
     """Stand-in forward kinematics: the plate sits at x = q[0] (m), y = q[1], level, rotated by q[2] about z."""
 

@@ -51,7 +51,7 @@ def synthetic_results() -> dict:
             evs[e.id] = {"duration_s": 5.0, "cart_pos_dev_mean_cm": 6.0, "episodes": 1200, "limit_violations": 0}
         if e.task:  # Table VII: one row reached the path end, the other never did (no duration)
             m = {k: 0.5 + 0.01 * j for j, k in enumerate(METRICS)}
-            reached = e.model.endswith("_reward")
+            reached = "_reward" in e.model
             evs[e.id] = {**m, "episodes": 200, "limit_violations": 0, "ball_fell_pct": 0.5 if reached else 100.0,
                          "duration_end_of_path_s": 2.5 if reached else None}
     bases = {b.id: {"toppra_duration_s": 2.5 + 0.1 * i, "toppra_max_joint_dev_rad": 1e-4}
@@ -196,6 +196,8 @@ def test_training_record_names_the_method_from_the_shipped_config(tmp_path):
     assert training_record(ppo) == {"iterations": 3, "method": "PPO from scratch"}
     ppo_cfg = {"agent": {"algorithm": {"class_name": "PPO"}}, "init_from": "models/tracking/iiwa7_random/"}
     assert training_method(ppo_cfg) == "PPO from iiwa7_random"
+    assert training_method({"reward_curriculum": {"term": "path_length", "initial": 1.0, "iterations": 1000}}) \
+        == "PPO from scratch, path_length weight curriculum"
     assert training_method({"residual": {"scale": 0.25, "controller": {"name": "tray"}}}) \
         == "PPO residual over tray, from scratch"
     assert training_record(student)["method"] == "DAgger from law_tracker"

@@ -189,7 +189,8 @@ def warm_chain(model: str) -> list[str]:
 
 def training_method(cfg: dict[str, Any]) -> str:
     """How the policy of a run config was trained: ``PPO from scratch``, ``PPO from <model>`` for a warm start
-    (``init_from``), ``PPO residual over <controller>, from ...`` for a residual policy (it runs beside the controller),
+    (``init_from``), either with ``, <term> weight curriculum`` when a reward weight moved during training,
+    ``PPO residual over <controller>, from ...`` for a residual policy (it runs beside the controller),
     ``DAgger from <teacher>`` for a distilled student (``DAgger from <teacher> around <model>`` when the teacher
     wraps a shipped policy), ``not trained (<controller>)`` for a
     model-based controller's directory, ``<controller> around <model>`` for a controller that wraps a shipped
@@ -206,6 +207,9 @@ def training_method(cfg: dict[str, Any]) -> str:
         return f"DAgger from {teacher.get('name', 'a controller')}{around}"
     start = cfg.get("init_from")
     origin = f"from {Path(str(start)).name if start else 'scratch'}"
+    curriculum = cfg.get("reward_curriculum") or {}
+    if curriculum.get("term"):  # the reward's weights moved during training (pathrl.train.curricula)
+        origin += f", {curriculum['term']} weight curriculum"
     residual = (cfg.get("residual") or {}).get("controller")
     if residual:
         return f"{algorithm} residual over {residual.get('name', 'a controller')}, {origin}"
@@ -231,6 +235,7 @@ AUTHORS_BUDGETS = {"iiwa7_random": (195, 45.2), "iiwa7_random_track_distill": (1
                    "iiwa7_ball_balancing": (150, 30.8), "iiwa7_ball_balancing_length_lt": (150, 30.8),
                    "iiwa7_ball_balancing_track_distill": (150, 30.8),
                    "iiwa7_ball_balancing_reward": (629, 122.5),
+                   "iiwa7_ball_balancing_reward_scratch_length_curriculum": (629, 122.5),
                    "armar6_random": (619, 238.4), "armar6_random_track_distill": (619, 238.4),
                    "armar4_random": (137, 137.0),
                    "armar4_random_track_distill": (137, 137.0), "armar4_target_point": (110, 93.8),

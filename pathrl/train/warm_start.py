@@ -77,12 +77,14 @@ def warm_start(alg, source: str | Path, num_obs: int, init_std: float | None = N
             raise WarmStartError(f"init_from={source}: a distilled student must have the new robot's joints")
         if path_joints is not None and list(src[1]) != list(path_joints):
             raise WarmStartError(f"init_from={source}: path joints differ ({src[1]} vs {list(path_joints)})")
+        if _input_width(alg, num_obs) != num_obs:
+            raise WarmStartError(f"init_from={source}: a source on other joints cannot start an asymmetric critic")
         cols = input_columns(joint_rows(src[0], joints), len(joints), actor["mlp.0.weight"].shape[1], num_obs)
         actor = actor_for_joints(actor, src[0], joints, num_obs, init_std)
         critic = widen_inputs(critic, num_obs, cols)
     else:
         actor = widen_inputs(actor, num_obs)
-        critic = None if critic is None else widen_inputs(critic, num_obs)
+        critic = None if critic is None else widen_inputs(critic, _input_width(alg, num_obs))
     state = {"actor_state_dict": actor}
     if critic is not None:  # a distilled student has none: the run's new critic stays
         state["critic_state_dict"] = critic
@@ -91,3 +93,11 @@ def warm_start(alg, source: str | Path, num_obs: int, init_std: float | None = N
     except RuntimeError as exc:
         raise WarmStartError(f"init_from={source}: network does not fit ({str(exc).splitlines()[0]})") from None
     return ckpt
+
+
+def _input_width(alg, num_obs: int) -> int:
+    """Inputs of the run's critic (an asymmetric critic also sees the privileged group, appended after the policy's
+    `num_obs`); `num_obs` where the algorithm has no critic of that shape."""
+    critic = getattr(alg, "_raw_critic", None)
+    weight = None if critic is None else critic.state_dict().get("mlp.0.weight")
+    return num_obs if weight is None else int(weight.shape[1])
