@@ -217,9 +217,9 @@ RECEIPTS: list[Receipt] = [
       p("I", "iiwa7/ball_balancing", "duration_s"), p("I", "iiwa7/ball_balancing", "cart_pos_dev_mean_cm")),
     R(README, "(Table VII, 200 whole test paths in PyBullet)", raw("iiwa7_ball_balancing_residual_in_pybullet",
       "episodes")),
-    R(README, "(128 M steps at 65.5 k samples per iteration),\nthen 79 M steps more at the paper's batch scale (262 k). It "
-              "loses 0.5 % of the balls at 2.67 s and 3.72 cm (paper\n0.3 % at 2.99 s and 2.3 cm), 85.5 % with its ball "
-              "sensor frozen",
+    R(README, "(128 M steps at 65.5 k samples per iteration),\nthen 79 M steps more at the paper's batch scale "
+              "(262 k). It loses 0.5 % of the balls at 2.67 s and 3.72 cm (paper\n0.3 % at 2.99 s and 2.3 cm), "
+              "85.5 % with its ball sensor frozen",
       summary(SCRATCH, "env_steps", 1e-6), summary(SCRATCH, "steps_per_iteration", 1e-3),
       summary(BIG_BATCH, "env_steps", 1e-6), summary(BIG_BATCH, "steps_per_iteration", 1e-3),
       t("VII", "balancing_reward", "ball_fell_pct"), t("VII", "balancing_reward", "duration_end_of_path_s"),
@@ -597,12 +597,13 @@ RECEIPTS += [
            "paper: 100 %,",
       raw("iiwa7_ball_balancing_in_pybullet", "episodes"), t(VII, "no_balancing_reward", "ball_fell_pct"),
       p(VII, "no_balancing_reward", "ball_fell_pct")),
-    R(RES, "an exploration floor of 0.05; the authors' balls", cfg(SCRATCH, "agent.actor.distribution_cfg.std_range.0")),
+    R(RES, "an exploration floor of 0.05; the authors' balls",
+      cfg(SCRATCH, "agent.actor.distribution_cfg.std_range.0")),
     R(RES, "the path-length term weighted 1 at first, moving linearly to the paper's 4 by iteration 1000",
       cfg(SCRATCH, "reward_curriculum.initial"), cfg(SCRATCH, "reward.terms.path_length.weight"),
       cfg(SCRATCH, "reward_curriculum.iterations")),
-    R(RES, "Its checkpoint 1950 (128 M steps, 77 min on one thread) is row\n  `balancing_reward/small_batch`: 0.5 % lost "
-           "at 3.37 s and 4.06 cm",
+    R(RES, "Its checkpoint 1950 (128 M steps, 77 min on one thread) is row\n  `balancing_reward/small_batch`: "
+           "0.5 % lost at 3.37 s and 4.06 cm",
       summary(SCRATCH, "checkpoint_iteration"), summary(SCRATCH, "env_steps", 1e-6), minutes(SCRATCH),
       t(VII, "balancing_reward/small_batch", "ball_fell_pct"),
       t(VII, "balancing_reward/small_batch", "duration_end_of_path_s"),
