@@ -670,6 +670,10 @@ RECEIPTS += [
     R(RES, "| **4.0 %** | 3.68 s |", t(VII, "model_based_feedback", "ball_fell_pct"),
       t(VII, "model_based_feedback", "duration_end_of_path_s")),
     R(RES, "(`open_loop=true`) | 85.0 % |", t(VII, "model_based_feedback/open_loop", "ball_fell_pct")),
+    R(RES, "(`models/tracking/iiwa7_ball_balancing_reward_scratch_big_batch`; sensor frozen: 85.5 %) | **0.5 %** | "
+           "**2.67 s** |",
+      t(VII, "balancing_reward/open_loop", "ball_fell_pct"), t(VII, "balancing_reward", "ball_fell_pct"),
+      t(VII, "balancing_reward", "duration_end_of_path_s")),
     R(RES, "| 87.5 % (90.5 % open loop) | 2.31 s |", t(VII, "balancing_reward_from_tracking", "ball_fell_pct"),
       t(VII, "balancing_reward_from_tracking/open_loop", "ball_fell_pct"),
       t(VII, "balancing_reward_from_tracking", "duration_end_of_path_s")),
