@@ -72,19 +72,20 @@ def warm_start(alg, source: str | Path, num_obs: int, init_std: float | None = N
     if init_std is not None and "distribution.std_param" in actor:
         actor["distribution.std_param"] = torch.full_like(actor["distribution.std_param"], init_std)
     src = source_joints(ckpt) if joints is not None else None
+    critic_obs = _input_width(alg, num_obs)
     if src is not None and list(src[0]) != list(joints):
         if critic is None:  # a distilled student (pathrl.train.distill)
             raise WarmStartError(f"init_from={source}: a distilled student must have the new robot's joints")
         if path_joints is not None and list(src[1]) != list(path_joints):
             raise WarmStartError(f"init_from={source}: path joints differ ({src[1]} vs {list(path_joints)})")
-        if _input_width(alg, num_obs) != num_obs:
+        if critic_obs != num_obs:
             raise WarmStartError(f"init_from={source}: a source on other joints cannot start an asymmetric critic")
         cols = input_columns(joint_rows(src[0], joints), len(joints), actor["mlp.0.weight"].shape[1], num_obs)
         actor = actor_for_joints(actor, src[0], joints, num_obs, init_std)
         critic = widen_inputs(critic, num_obs, cols)
     else:
         actor = widen_inputs(actor, num_obs)
-        critic = None if critic is None else widen_inputs(critic, _input_width(alg, num_obs))
+        critic = None if critic is None else widen_inputs(critic, critic_obs)
     state = {"actor_state_dict": actor}
     if critic is not None:  # a distilled student has none: the run's new critic stays
         state["critic_state_dict"] = critic
