@@ -189,13 +189,14 @@ class BallCurriculumCfg:
 
 @dataclass
 class RewardCurriculumCfg:
-    """A curriculum on one reward term's weight (``reward_curriculum``; training only): the term ``term`` starts at
-    weight ``initial`` and moves linearly to the reward's configured weight, reached at iteration ``iterations``. It
-    depends only on the iteration, so a resumed run continues it."""
+    """A curriculum on reward term weights (``reward_curriculum``; training only): the term ``term`` (and each term in
+    ``also``) starts at weight ``initial`` and moves linearly to its configured weight in the reward, reached at
+    iteration ``iterations``. It depends only on the iteration, so a resumed run continues it."""
 
     term: str = MISSING
     initial: float = MISSING
     iterations: int = 1000
+    also: list[str] = field(default_factory=list)  # more terms moved alike (deviation_mean beside deviation_max)
 
 
 @dataclass

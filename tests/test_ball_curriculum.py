@@ -91,6 +91,32 @@ def test_reward_weight_schedule_by_hand_and_on_the_env():
         apply_reward_curriculum(runner, RewardCurriculumCfg(term="ball", initial=1.0))
 
 
+def test_reward_curriculum_moves_every_named_term_to_its_own_weight():
+    """deviation_max (0.9) and deviation_mean (0.5) from 2.7 over 100 iterations: at 50 each is half way to its own
+    weight (1.8, 1.6), the path-length term untouched; a misspelt extra term is refused."""
+    from types import SimpleNamespace
+
+    from pathrl.envs.rewards import build_reward_terms
+    from pathrl.schema import RewardCurriculumCfg
+    from pathrl.train.curricula import apply_reward_curriculum
+
+    terms = build_reward_terms({"path_length": {"weight": 4.0}, "deviation_max": {"weight": 0.9},
+                                "deviation_mean": {"weight": 0.5}})
+    hooks = []
+    runner = SimpleNamespace(env=SimpleNamespace(generator=None, reward_terms=terms), current_learning_iteration=50,
+                             after_each_update=hooks.append)
+    cur = RewardCurriculumCfg(term="deviation_max", also=["deviation_mean"], initial=2.7, iterations=100)
+    apply_reward_curriculum(runner, cur)
+    assert [t.weight for t in terms] == pytest.approx([4.0, 1.8, 1.6])
+    hooks[0](0)
+    assert [t.weight for t in terms] == pytest.approx([4.0, 2.7, 2.7])
+    hooks[0](150)
+    assert [t.weight for t in terms] == pytest.approx([4.0, 0.9, 0.5])
+    bad = RewardCurriculumCfg(term="deviation_max", also=["deviation_men"], initial=2.7)
+    with pytest.raises(ValueError, match="no term 'deviation_men'"):
+        apply_reward_curriculum(runner, bad)
+
+
 def test_tiny_training_with_the_reward_curriculum(tiny_dataset, tmp_path):
     exp = "+experiment=iiwa7_ball_balancing_reward_scratch_length_curriculum"
     r = run(train_cmd(tiny_dataset, tmp_path / "rc", 2, exp, "reward_curriculum.iterations=2"))

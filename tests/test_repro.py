@@ -198,6 +198,9 @@ def test_training_record_names_the_method_from_the_shipped_config(tmp_path):
     assert training_method(ppo_cfg) == "PPO from iiwa7_random"
     assert training_method({"reward_curriculum": {"term": "path_length", "initial": 1.0, "iterations": 1000}}) \
         == "PPO from scratch, path_length weight curriculum"
+    both = {"term": "deviation_max", "also": ["deviation_mean"], "initial": 2.7, "iterations": 200}
+    assert training_method({"init_from": "models/tracking/a", "reward_curriculum": both}) \
+        == "PPO from a, deviation_max and deviation_mean weight curriculum"
     assert training_method({"residual": {"scale": 0.25, "controller": {"name": "tray"}}}) \
         == "PPO residual over tray, from scratch"
     assert training_record(student)["method"] == "DAgger from law_tracker"

@@ -209,7 +209,8 @@ def training_method(cfg: dict[str, Any]) -> str:
     origin = f"from {Path(str(start)).name if start else 'scratch'}"
     curriculum = cfg.get("reward_curriculum") or {}
     if curriculum.get("term"):  # the reward's weights moved during training (pathrl.train.curricula)
-        origin += f", {curriculum['term']} weight curriculum"
+        moved = [curriculum["term"], *(curriculum.get("also") or [])]
+        origin += f", {' and '.join(moved)} weight curriculum"
     residual = (cfg.get("residual") or {}).get("controller")
     if residual:
         return f"{algorithm} residual over {residual.get('name', 'a controller')}, {origin}"

@@ -2,9 +2,10 @@
 
 * the ball (``task.curriculum``, :class:`pathrl.schema.BallCurriculumCfg`): new balls roll less and start nearer
   the plate's centre at first, moving to the task's own balls;
-* a reward term's weight (``reward_curriculum``, :class:`pathrl.schema.RewardCurriculumCfg`): the term starts at
-  another weight and moves linearly to the reward's configured one, e.g. the path-length weight of the ball task
-  low at first (keep the ball, then get fast), the configured reward from the given iteration on.
+* reward term weights (``reward_curriculum``, :class:`pathrl.schema.RewardCurriculumCfg`): the terms start at
+  another weight and move linearly to the reward's configured ones, e.g. the path-length weight of the ball task
+  low at first (keep the ball, then get fast), or its deviation weights high (get close to the path, then fast),
+  the configured reward from the given iteration on.
 
 Each is applied to the training env before every rollout through a runner hook
 (:meth:`pathrl.train.runner.PathRLRunner.after_each_update`).
@@ -56,18 +57,20 @@ def apply_ball_curriculum(runner: Any, cur: BallCurriculumCfg) -> None:
 
 
 def apply_reward_curriculum(runner: Any, cur: RewardCurriculumCfg) -> None:
-    """Set the weight of the curriculum's reward term of the training env before every rollout (ValueError, one
+    """Set the weights of the curriculum's reward terms of the training env before every rollout (ValueError, one
     line: the env's reward has no such term)."""
     env = unwrapped(runner.env)
     terms = list(getattr(env, "reward_terms", []))
-    idx = [i for i, t in enumerate(terms) if t.name == cur.term]
-    if not idx:
-        raise ValueError(f"reward_curriculum.term: the reward has no term {cur.term!r}; it has "
-                         f"{', '.join(t.name for t in terms) or 'none'}")
-    i, final = idx[0], terms[idx[0]].weight
+    names = [t.name for t in terms]
+    moved = [cur.term, *cur.also]
+    for name in moved:
+        if name not in names:
+            raise ValueError(f"reward_curriculum: the reward has no term {name!r}; it has {', '.join(names) or 'none'}")
+    finals = {i: t.weight for i, t in enumerate(terms) if t.name in moved}
 
     def apply(it: int) -> None:
-        env.reward_terms[i] = dataclasses.replace(env.reward_terms[i], weight=reward_weight(it, cur, final))
+        for i, final in finals.items():
+            env.reward_terms[i] = dataclasses.replace(env.reward_terms[i], weight=reward_weight(it, cur, final))
 
     apply(runner.current_learning_iteration)
     runner.after_each_update(apply)
