@@ -238,6 +238,7 @@ AUTHORS_BUDGETS = {"iiwa7_random": (195, 45.2), "iiwa7_random_track_distill": (1
                    "iiwa7_ball_balancing_reward": (629, 122.5),
                    "iiwa7_ball_balancing_reward_scratch_length_curriculum": (629, 122.5),
                    "iiwa7_ball_balancing_reward_scratch_big_batch": (629, 122.5),
+                   "iiwa7_ball_balancing_reward_scratch_deviation": (629, 122.5),
                    "armar6_random": (619, 238.4), "armar6_random_track_distill": (619, 238.4),
                    "armar4_random": (137, 137.0),
                    "armar4_random_track_distill": (137, 137.0), "armar4_target_point": (110, 93.8),
