@@ -162,6 +162,12 @@ SCRATCH = "iiwa7_ball_balancing_reward_scratch_length_curriculum"  # Table VII: 
 BIG_BATCH = "iiwa7_ball_balancing_reward_scratch_big_batch"  # Table VII: the same trained on at the paper's batch
 DEVIATION = "iiwa7_ball_balancing_reward_scratch_deviation"  # Table VII's row: the same trained on, deviation-weighted
 
+
+def _stage_steps() -> float:
+    """Env steps of Table VII's PPO row over its three training stages (each model's summary.json)."""
+    return sum(summary(m, "env_steps")() for m in (SCRATCH, BIG_BATCH, DEVIATION))
+
+
 RECEIPTS: list[Receipt] = [
     # README.md, above the headline
     R(README, "chooses, every 0.1 s, an acceleration", cfg("iiwa7_random", "env.dt")),
@@ -633,10 +639,8 @@ RECEIPTS += [
       raw("iiwa7_ball_balancing_reward_scratch_deviation_in_pybullet", "limit_violations"),
       p(VII, "balancing_reward", "ball_fell_pct"), p(VII, "balancing_reward", "duration_end_of_path_s"),
       p(VII, "balancing_reward", "cart_pos_dev_mean_cm"),
-      derived(lambda: sum(_json(f"models/tracking/{m}/summary.json")["env_steps"]
-                          for m in (SCRATCH, BIG_BATCH, DEVIATION)) / 1e6, "the three stages' steps"),
-      derived(lambda: 100 * sum(_json(f"models/tracking/{m}/summary.json")["env_steps"]
-                                for m in (SCRATCH, BIG_BATCH, DEVIATION)) / 629e6,
+      derived(lambda: _stage_steps() / 1e6, "the three stages' steps"),
+      derived(lambda: 100 * _stage_steps() / 629e6,
               "share of the paper's budget"),
       const(629, "the paper's env steps (M), docs/shared notes on the authors' checkpoints")),
     R(RES, "loses 92.0 %, so it keeps the ball", t(VII, "balancing_reward/open_loop", "ball_fell_pct")),
