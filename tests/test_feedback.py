@@ -520,3 +520,28 @@ def test_task_failure_time_and_after_end():
     assert not _task_failure(rec([1.0, 1.0, 0.0, 0.0], -1), "up")["task_failed_after_end"]  # never reached
     assert _task_failure(rec([1.0, 1.0, 1.0], 2), "up") == {"task_failed": False, "task_failed_at_s": None,
                                                             "task_failed_after_end": False}
+
+
+def test_the_authors_signed_ball_term_by_hand(iiwa):
+    """ball_reach reads the authors' board axes (board x = plate -y, board y = plate +x) and ball_signed rates
+    only offsets toward their +x / +y: min(1, (1 - m) / 0.94)^2, 0 off the plate; both backends report it."""
+    from pathrl.envs.rewards import StepQuantities, ball_signed
+    from pathrl.sim.feedback import ball_reach
+    from pathrl.sim.vec import PyBulletBall
+
+    rel = torch.tensor([[0.5, 0.0], [-0.5, 0.0], [0.0, 0.5], [0.0, -0.5], [0.2, -0.7]], dtype=torch.float64)
+    assert ball_reach(rel).tolist() == pytest.approx([0.5, 0.0, 0.0, 0.5, 0.7])
+    zero = torch.zeros(5, dtype=torch.float64)
+    task = {"ball_reach": torch.tensor([0.5, 0.0, -0.5, 1.0, 0.5]),
+            "ball_on_plate": torch.tensor([1.0, 1.0, 1.0, 1.0, 0.0])}
+    q = StepQuantities(zero, zero, zero, zero, zero, zero, zero.bool(), task=task)
+    assert ball_signed(q, margin=0.06).tolist() == pytest.approx([(0.5 / 0.94) ** 2, 1.0, 1.0, 0.0, 0.0])
+    model = AnalyticBall(iiwa, 1, seed=0)
+    model.reset(torch.arange(1), LEVEL.expand(1, 7).clone())
+    place(model, [[-0.05, 0.05]])  # toward the plate's -x and +y: free in the authors' axes
+    assert model.values()["ball_reach"].item() == pytest.approx(max(-0.05 / 0.10575, -0.05 / 0.13965))
+    pyb = PyBulletBall(iiwa, 1, seed=0, workers=1)
+    try:
+        assert "ball_reach" in pyb.value_names and set(pyb.values()) == set(model.values())
+    finally:
+        pyb.close()

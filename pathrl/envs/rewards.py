@@ -17,8 +17,8 @@ import torch
 from torch import Tensor
 
 __all__ = ["ENV_VALUES", "REWARD_TERMS", "TASK_VALUES", "RewardFn", "RewardTerm", "StepQuantities", "action_saturation",
-           "ball_centre", "ball_drive", "base_orientation", "base_position", "base_tilt", "build_reward_terms",
-           "deviation_max", "deviation_mean", "path_length", "tcp_deviation"]
+           "ball_centre", "ball_drive", "ball_signed", "base_orientation", "base_position", "base_tilt",
+           "build_reward_terms", "deviation_max", "deviation_mean", "path_length", "tcp_deviation"]
 
 
 @dataclass(frozen=True)
@@ -104,6 +104,17 @@ def ball_centre(q: StepQuantities, margin: float = 0.06) -> Tensor:
     return (1.0 - (d / (1.0 - margin)).clamp(max=1.0)) ** 2 * on
 
 
+def ball_signed(q: StepQuantities, margin: float = 0.06) -> Tensor:
+    """The authors' ball-on-plate reward: min(1, (1 - m) / (1 - margin))^2 while the ball is on the plate, else 0.
+
+    m = max(x_rel, y_rel) of the ball in the authors' board axes relative to the usable half-sizes (task value
+    ``ball_reach``, :func:`pathrl.sim.feedback.ball_reach`): only offsets toward the board's +x or +y lower it,
+    an offset toward -x / -y is free (1 at m <= margin, 0 at the usable edge). As their code computes it.
+    """
+    m, on = q.task["ball_reach"], q.task["ball_on_plate"]
+    return ((1.0 - m) / (1.0 - margin)).clamp(0.0, 1.0) ** 2 * on
+
+
 def ball_drive(q: StepQuantities, threshold: float = 0.1) -> Tensor:
     """Ball-on-plate shaping: (1 - min(1, F / threshold))^2 while the ball is on the plate, else 0.
 
@@ -138,6 +149,7 @@ REWARD_TERMS: dict[str, RewardFn] = {
     "tcp_deviation": tcp_deviation,
     "action_saturation": action_saturation,
     "ball_centre": ball_centre,
+    "ball_signed": ball_signed,
     "ball_drive": ball_drive,
     "base_tilt": base_tilt,
     "base_position": base_position,
@@ -146,6 +158,7 @@ REWARD_TERMS: dict[str, RewardFn] = {
 
 #: Feedback values (StepQuantities.task) a term reads; the env refuses terms its feedback cannot serve.
 TASK_VALUES: dict[str, tuple[str, ...]] = {"ball_centre": ("ball_dist", "ball_on_plate"),
+                                           "ball_signed": ("ball_reach", "ball_on_plate"),
                                            "ball_drive": ("ball_drive", "ball_on_plate"), "base_tilt": ("base_tilt",),
                                            "base_position": ("base_offset",),
                                            "base_orientation": ("base_orientation",),

@@ -42,7 +42,8 @@ from pathrl.robot.model import RobotSpec, load_robot
 from pathrl.runs import RunError, committed_split, load_policy, load_run, make_controller, policy_scale
 from pathrl.storage import inside_models, write_json_atomic
 
-__all__ = ["FAILURE_METRIC", "PYBULLET_ENVS", "EvalOptions", "evaluate", "output_dir_of", "write_episodes_mcap"]
+__all__ = ["FAILURE_METRIC", "PYBULLET_ENVS", "EvalOptions", "EvalSource", "evaluate", "output_dir_of", "run_rollouts",
+           "write_episodes_mcap"]
 
 
 @dataclass(frozen=True)
@@ -112,6 +113,13 @@ def evaluate(run_dir: Path, opts: EvalOptions = EvalOptions()) -> dict[str, Any]
     policy.
     """
     out = _checked_out_dir(run_dir, opts)
+    records, rollout_s, source = run_rollouts(run_dir, opts)
+    return _finish(records, rollout_s, source, opts, out)
+
+
+def run_rollouts(run_dir: Path, opts: EvalOptions = EvalOptions()) -> tuple[list[EpisodeRecord], float, EvalSource]:
+    """The deterministic rollouts :func:`evaluate` measures: the episode records, their wall time (s) and what ran
+    them (:class:`EvalSource`); nothing is written. For analyses beyond metrics.json (e.g. tools/lab/plate_tilt.py)."""
     torch.set_num_threads(int(os.environ.get("PATHRL_THREADS", "1")))
     cfg, ckpt, summary = load_run(run_dir)
     ckpt = _checkpoint(run_dir, ckpt, opts.checkpoint)
@@ -149,12 +157,11 @@ def evaluate(run_dir: Path, opts: EvalOptions = EvalOptions()) -> dict[str, Any]
     finally:
         if env.feedback is not None:
             env.feedback.close()
-    source = _Source(run_dir, ckpt, ds_path, robot, env, paths, cfg if has_task else None)
-    return _finish(records, rollout_s, source, opts, out)
+    return records, rollout_s, EvalSource(run_dir, ckpt, ds_path, robot, env, paths, cfg if has_task else None)
 
 
 @dataclass(frozen=True)
-class _Source:
+class EvalSource:
     """What the rollouts ran: the run directory and its checkpoint (None: a controller), the dataset path, the robot,
     the env and its path bank, and the run config if it has a feedback task (None: path tracking only)."""
 
@@ -216,7 +223,7 @@ def _run(env: PathTrackingEnv, policy, plan, episodes: int, progress: bool) -> l
     return records
 
 
-def _finish(records: list[EpisodeRecord], rollout_s: float, src: _Source, opts: EvalOptions,
+def _finish(records: list[EpisodeRecord], rollout_s: float, src: EvalSource, opts: EvalOptions,
             out: Path) -> dict[str, Any]:
     """Per-episode and aggregate metrics of the rollouts (`rollout_s`: their wall time, s); writes metrics.json
     (+ episodes.mcap) into `out`."""

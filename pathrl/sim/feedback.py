@@ -23,8 +23,8 @@ from pathrl.robot.model import RobotSpec
 
 __all__ = ["BALL_RADIUS_MM", "GRAVITY", "PLACE_MARGIN", "PLATE_BORDER", "PLATE_SIZE", "RES_FACTOR", "ROLL_FACTOR",
            "ROLL_MU_1E4", "USABLE_HALF", "AnalyticBall", "Feedback", "FeedbackStep", "FrozenSensor", "PlateDrive",
-           "PlateIMU", "ball_observation", "inplane_force", "mean_drive", "plate_pose", "rolling_resistance",
-           "sample_ball_radius", "sample_ball_xy", "sample_rolling_friction"]
+           "PlateIMU", "ball_observation", "ball_reach", "ball_values", "inplane_force", "mean_drive", "plate_pose",
+           "rolling_resistance", "sample_ball_radius", "sample_ball_xy", "sample_rolling_friction"]
 
 
 GRAVITY = 9.81  # m/s^2
@@ -40,6 +40,24 @@ ROLL_FACTOR = 5.0 / 7.0  # in-plane ball acceleration / in-plane (g - a_plate): 
 # Rolling friction mu (m) resists like a force RES_FACTOR * mu * N / radius (fitted to PyBullet on tilted plates:
 # 1-10 deg, mu 1e-4..7e-4, radius 20-36 mm; tests/test_feedback.py)
 RES_FACTOR = 0.5
+
+
+def ball_reach(rel: Tensor) -> Tensor:
+    """The authors' signed ball offset (N,) of balls at `rel` (N, 2), plate axes, relative to the usable half-sizes.
+
+    Their board is turned by -90 deg about the TCP's z axis (board x = TCP -y, board y = TCP +x; ours is not
+    turned) and their reward reads max(x_board, y_board): only offsets toward the board's +x / +y count. Returns
+    max(-rel_y, rel_x), each relative to this plate's usable half-size along that axis.
+    """
+    return torch.maximum(-rel[:, 1], rel[:, 0])
+
+
+def ball_values(rel: Tensor, on: Tensor, drive: Tensor) -> dict[str, Tensor]:
+    """Task values (N,) of balls at `rel` (N, 2) (relative to the usable half-sizes), on the plate `on` (N,) bool,
+    plate drive `drive` (N,): ball_dist (distance from the centre), ball_reach (:func:`ball_reach`), ball_on_plate
+    (1 / 0), ball_drive."""
+    return {"ball_dist": rel.norm(dim=1), "ball_reach": ball_reach(rel), "ball_on_plate": on.to(torch.float64),
+            "ball_drive": drive}
 
 
 @dataclass(frozen=True)
@@ -231,7 +249,7 @@ class AnalyticBall:
 
     name = "ball_on_plate"
     num_obs = 4
-    value_names = ("ball_dist", "ball_on_plate", "ball_drive")
+    value_names = ("ball_dist", "ball_reach", "ball_on_plate", "ball_drive")
     ok_value = "ball_on_plate"
 
     def __init__(self, robot: RobotSpec, num_envs: int, control_rate: float = 240.0, seed: int = 0,
@@ -338,8 +356,7 @@ class AnalyticBall:
     def values(self) -> dict[str, Tensor]:
         """Task values per env (N,): ball distance from the centre (fraction of the usable half-size), on the plate (0 /
         1) and drive."""
-        rel = self.xy / self.half
-        return {"ball_dist": rel.norm(dim=1), "ball_on_plate": self.on.to(torch.float64), "ball_drive": self.drive}
+        return ball_values(self.xy / self.half, self.on, self.drive)
 
     def observe(self) -> Tensor:
         """See :meth:`Feedback.observe`: the ball state (N, 4), clamped to [-1, 1]."""

@@ -30,7 +30,7 @@ from torch import Tensor
 
 from pathrl.robot.kinematics import ForwardKinematics
 from pathrl.robot.model import RobotSpec
-from pathrl.sim.feedback import USABLE_HALF, FeedbackStep, PlateDrive, PlateIMU, ball_observation
+from pathrl.sim.feedback import USABLE_HALF, FeedbackStep, PlateDrive, PlateIMU, ball_observation, ball_values
 from pathrl.sim.standing import BASE_POS_SCALE, FALL_TILT_RAD, standing_observation, standing_values
 
 __all__ = ["BASE_POS_SCALE", "PyBulletBall", "PyBulletStanding", "ScenePool", "kept_pools"]
@@ -266,7 +266,7 @@ class PyBulletBall(_PooledFeedback):
 
     kind = name = "ball_on_plate"
     num_obs = 4
-    value_names = ("ball_dist", "ball_on_plate", "ball_drive")
+    value_names = ("ball_dist", "ball_reach", "ball_on_plate", "ball_drive")
     ok_value = "ball_on_plate"
 
     def __init__(self, robot: RobotSpec, num_envs: int, control_rate: float = 240.0, seed: int = 0,
@@ -306,10 +306,8 @@ class PyBulletBall(_PooledFeedback):
         return FeedbackStep(obs=self.observe(), values=self.values(), failed=was_on & ~self.ok)
 
     def values(self) -> dict[str, Tensor]:
-        """Task values (N,) for reward terms: ball_dist (centre distance / usable half-size), ball_on_plate (1/0),
-        ball_drive (:class:`~pathrl.sim.feedback.PlateDrive`)."""
-        return {"ball_dist": (self.xy / self.half).norm(dim=1), "ball_on_plate": self.ok.to(torch.float64),
-                "ball_drive": self.plate_drive.value}
+        """Task values (N,) for reward terms (:func:`~pathrl.sim.feedback.ball_values`)."""
+        return ball_values(self.xy / self.half, self.ok, self.plate_drive.value)
 
     def observe(self) -> Tensor:
         """The ball part of the state (N, num_obs) in [-1, 1]: previous and current relative position (+ IMU)."""
