@@ -24,7 +24,7 @@ import torch
 from torch import Tensor
 
 from pathrl.eval.evaluate import EvalOptions, run_rollouts
-from pathrl.eval.metrics import matched_samples
+from pathrl.eval.metrics import matched_samples, sample_deviations
 from pathrl.robot.kinematics import ForwardKinematics
 from pathrl.sim.feedback import GRAVITY, plate_pose
 
@@ -50,15 +50,14 @@ def analyse(run_dir: Path) -> dict[str, float]:
     fk, index = src.env.fk, torch.as_tensor(src.robot.path_index)
     matched = matched_samples([r.setpoints for r in records], index, src.paths, [r.path for r in records],
                               [r.start_s for r in records], [r.end_s for r in records])
+    devs = sample_deviations([r.setpoints for r in records], matched, index, fk)  # as metrics.json has them
     rows = []
-    for rec, (done, ref) in zip(records, matched, strict=True):
+    for rec, dev in zip(records, devs, strict=True):
         n = rec.finish_step * STEP if rec.finish_step >= 0 else len(rec.setpoints) - 1
         tilt, need = tilt_and_need(fk, rec.setpoints[: n + 1])
-        p_done, _ = fk.tcp_transforms(done.to(torch.float64))
-        p_ref, _ = fk.tcp_transforms(ref.to(torch.float64))
-        rows.append((tilt, need, (p_done[:, 0] - p_ref[:, 0]).norm(dim=1).mean().item(), rec.finish_step * 0.1))
+        rows.append((tilt, need, dev["cart_pos_dev_mean_cm"], rec.finish_step * 0.1))
     a = np.array(rows)
-    return {"end_of_path_s": float(a[:, 3].mean()), "deviation_cm": 100.0 * float(a[:, 2].mean()),
+    return {"end_of_path_s": float(a[:, 3].mean()), "deviation_cm": float(a[:, 2].mean()),
             "tilt_deg": math.degrees(a[:, 0].mean()), "needed_tilt_deg": math.degrees(a[:, 1].mean()),
             "corr_deviation_tilt": float(np.corrcoef(a[:, 2], a[:, 0])[0, 1])}
 
