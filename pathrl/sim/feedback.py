@@ -354,8 +354,7 @@ class AnalyticBall:
         return FeedbackStep(obs=self.observe(), values=self.values(), failed=was_on & ~self.on)
 
     def values(self) -> dict[str, Tensor]:
-        """Task values per env (N,): ball distance from the centre (fraction of the usable half-size), on the plate (0 /
-        1) and drive."""
+        """Task values per env (N,) for reward terms (:func:`ball_values`)."""
         return ball_values(self.xy / self.half, self.on, self.drive)
 
     def observe(self) -> Tensor:
