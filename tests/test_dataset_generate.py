@@ -181,3 +181,42 @@ def test_broad_random_paths_are_straighter(tmp_path, checker):
         gaps = [np.linalg.norm(np.diff(k[:n], axis=0), axis=1) for k, n in knots]
         widest[name] = float(np.quantile(np.concatenate(gaps), 0.9))
     assert widest["smooth"] > 1.3 * widest["independent"], widest
+
+
+def test_ball_sweep_paths_sweep_the_base_and_keep_the_plate_horizontal(tmp_path, checker):
+    """The authors'-shape options: start in the start region, q1 never turns back (before a reflection flips it), and
+    every reflected path still keeps the plate horizontal and passes the checks."""
+    from pathrl.datagen.generators.ball_balancing import REFLECTIONS
+
+    spec = load_robot_by_name("iiwa7")
+    cfg = OmegaConf.to_container(OmegaConf.load(CONF_DIR / "dataset" / "ball_balancing_sweep.yaml"), resolve=False)
+    cfg.pop("defaults")
+    params = {**cfg["params"], "chunk_size": 4}
+    generate_dataset(robot_cfg("iiwa7"), dataset_cfg("ball_balancing", **params), dest=tmp_path / "s", progress=False)
+    ds = load_dataset(tmp_path / "s", spec)
+    _check_paths(ds, spec, checker, 3.2, 5.1, tol=1e-9)
+    start_q1 = np.asarray(params["start_region"][0])
+    for knots in ds.splits["train"].knots + ds.splits["test"].knots:
+        q, _ = sample_uniform(knots, 0.01)
+        assert ball_constraint_violation(q).max() < 1e-9
+        signs = [s for s in REFLECTIONS if start_q1[0] - 1e-9 <= s[0] * knots[0, 0] <= start_q1[1] + 1e-9]
+        assert signs, "the start's q1 is in the start region up to a reflection"
+        base = knots * signs[0]  # undo the reflection
+        # one way, up to the spline's overshoot where the base stops at the region's end (up to a few centiradians)
+        assert np.all(np.diff(base[:, 0]) >= -0.05), "q1 sweeps one way"
+        assert base[:, 0].max() <= params["region"][0][1] + 0.05
+
+
+def test_ball_region_params_are_checked():
+    from pathrl.datagen.generators.ball_balancing import start_box, step_weights
+
+    lim = load_robot_by_name("iiwa7").pos_limits
+    np.testing.assert_allclose(start_box(lim, None), lim[[0, 1, 3]])
+    np.testing.assert_allclose(start_box(lim, [[-9, 0], [0, 1], [1, 9]])[[0, 2]], [[lim[0, 0], 0], [1, lim[3, 1]]])
+    with pytest.raises(DatasetError, match="start_region: expected three"):
+        start_box(lim, [[0, 1]])
+    with pytest.raises(DatasetError, match="region: .* outside the position limits"):
+        start_box(lim, [[5, 6], [0, 1], [0, 1]], "region")
+    np.testing.assert_allclose(step_weights(None), np.ones(3))
+    with pytest.raises(DatasetError, match="step_weights"):
+        step_weights([1.0, 0.0, 1.0])

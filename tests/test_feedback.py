@@ -545,3 +545,42 @@ def test_the_authors_signed_ball_term_by_hand(iiwa):
         assert "ball_reach" in pyb.value_names and set(pyb.values()) == set(model.values())
     finally:
         pyb.close()
+
+
+def test_bias_search_draws_the_same_balls_at_every_evaluation(iiwa, monkeypatch):
+    """With a ball, the search's objective must not depend on how often it was evaluated: every pass restores the
+    env's and the ball model's generators (pathrl.train.bias_search.env_generators) to their state at the start."""
+    import numpy as np
+
+    from pathrl.paths.segments import evaluation_plan
+    from pathrl.train import bias_search
+    from pathrl.train.bias_search import BiasSearchCfg, env_generators, episode_returns, search_output_bias
+
+    class Actor(torch.nn.Module):  # the rsl-rl models take the observation TensorDict
+        def __init__(self, n_obs: int, n_act: int) -> None:
+            super().__init__()
+            self.net = torch.nn.Sequential(torch.nn.Linear(n_obs, 8), torch.nn.ELU(), torch.nn.Linear(8, n_act))
+
+        def forward(self, obs):
+            return self.net(obs["policy"])
+
+    torch.manual_seed(0)
+    env = ball_env(iiwa, num_envs=6)
+    assert env_generators(env) == [env.generator, env.feedback.generator]
+    actor = Actor(env.num_obs, env.num_actions)
+    plan = evaluation_plan(env.paths, 6, "full", seed=0)
+    first, _ = episode_returns(env, actor, plan)
+    radius = env.feedback.radius.clone()
+    second, _ = episode_returns(env, actor, plan)
+    assert not torch.equal(radius, env.feedback.radius)  # left alone, each pass draws other balls...
+    assert not torch.equal(first, second)  # ...and the same policy scores differently
+
+    values = []
+
+    def twice(objective, dim, max_evals, bound):  # the objective at the start point, evaluated twice
+        values.extend([objective(np.zeros(dim)), objective(np.zeros(dim))])
+        return np.zeros(dim), values[0], values[0], 2
+
+    monkeypatch.setattr(bias_search, "search_bias", twice)
+    search_output_bias(env, actor, BiasSearchCfg(episodes=6, max_evals=2, bound=0.1))
+    assert values[0] == values[1]

@@ -32,8 +32,8 @@ from torch import Tensor
 
 from pathrl.paths.segments import Segments, evaluation_plan
 
-__all__ = ["BiasSearchCfg", "episode_returns", "output_layer", "search_before_training", "search_bias",
-           "search_output_bias"]
+__all__ = ["BiasSearchCfg", "env_generators", "episode_returns", "output_layer", "search_before_training",
+           "search_bias", "search_output_bias"]
 
 
 @dataclass(frozen=True)
@@ -98,6 +98,13 @@ def search_bias(objective: Callable[[np.ndarray], float], dim: int, max_evals: i
     return np.asarray(res.x, dtype=np.float64), -float(res.fun), f0, int(res.nfev) + 1
 
 
+def env_generators(env: Any) -> list[torch.Generator]:
+    """The random generators of `env`: its own and its feedback model's (the ball's radius, friction and start are
+    drawn at each episode start), if it has one."""
+    owners = (env, getattr(env, "feedback", None))
+    return [g for g in (getattr(o, "generator", None) for o in owners) if isinstance(g, torch.Generator)]
+
+
 def search_output_bias(env: Any, actor: torch.nn.Module, cfg: BiasSearchCfg) -> dict[str, Any]:
     """Search the output-layer bias of `actor` on `env` (the training env, ``num_envs`` = ``cfg.episodes``) and
     add the best offsets to it in place; returns the record (offsets, mean returns before and after, evaluations,
@@ -109,8 +116,12 @@ def search_output_bias(env: Any, actor: torch.nn.Module, cfg: BiasSearchCfg) -> 
     actor.eval()
 
     steps = [0]  # env steps simulated (every env of every pass, as long as the pass runs)
+    generators = env_generators(env)
+    states = [g.get_state() for g in generators]  # every pass draws the same balls: a deterministic objective
 
     def mean_return(offsets: np.ndarray) -> float:
+        for g, state in zip(generators, states, strict=True):
+            g.set_state(state)
         with torch.no_grad():
             layer.bias.copy_(base + torch.as_tensor(offsets, dtype=base.dtype, device=base.device))
         returns, n = episode_returns(env, actor, plan)

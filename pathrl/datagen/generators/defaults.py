@@ -69,6 +69,11 @@ DEFAULT_PARAMS: dict[str, dict[str, Any]] = {
         "waypoint_step": [0.8, 1.6],
         "waypoint_turn": 0.6,
         "q7_max": 0.006,
+        "start_region": None,  # [[lo, hi]] rad for q1, q2, q4 at the start (None: the position limits)
+        "step_weights": None,  # factors on the step direction's q1, q2, q4 (None: 1, 1, 1)
+        "region": None,  # [[lo, hi]] rad for q1, q2, q4 at every waypoint (None: the position limits)
+        "sweep": False,  # start heading +q1 and never turn q1 back (the authors' set sweeps the base)
+        "reflections": False,  # each path times one of the authors' 4 joint sign patterns, drawn uniformly
         "check_spacing": 0.05,
         "knot_spacing": 0.3,
         "max_tries": 200,
