@@ -68,6 +68,7 @@ def test_import_and_info(tmp_path, capsys):
         (["import", "--format", "kiemel-json", "--robot", "r2d2", "a", "b"], "unknown robot"),
         (["import", "--format", "kiemel-json", "--robot", "iiwa7", "/nonexistent/x", "DEST"], "not found"),
         (["info", "/nonexistent/dataset"], "not found"),
+        (["import", "--format", "csv", "--reflections", "--robot", "iiwa7", "a", "b"], "--reflections is for"),
     ],
 )
 def test_bad_input(tmp_path, capsys, monkeypatch, args, match):

@@ -172,3 +172,32 @@ def test_invalid_json_and_empty_dir(tmp_path, iiwa):
         import_kiemel(src, tmp_path / "out", iiwa)
     with pytest.raises(DatasetError, match="source directory not found"):
         import_kiemel(tmp_path / "missing", tmp_path / "out", iiwa)
+
+
+def test_reflections_store_every_path_once_per_sign_pattern(tmp_path, iiwa):
+    """--reflections: the authors' ball evaluation drew one of the set's reflection vectors per episode; the import
+    stores each path times each vector, named <name>_r<i>."""
+    rng = np.random.default_rng(4)
+    src = tmp_path / "ball"
+    truth = write_set(src, rng, {"test": 2})
+    signs = [[1] * 7, [-1] * 7, [-1, 1, -1, 1, -1, 1, -1]]
+    (src / "spline_config.json").write_text(json.dumps({"max_dis_between_knots": 0.32, "reflection_vectors": signs}))
+    ds = import_kiemel(src, tmp_path / "out", iiwa, reflections=True)
+    assert ds.meta["reflections"] is True and ds.meta["splits"] == {"train": 0, "test": 6}
+    loaded = load_dataset(tmp_path / "out", iiwa).splits["test"]
+    got = dict(zip(loaded.names, loaded.knots, strict=True))
+    for name, k in truth["test"].items():
+        for i, v in enumerate(signs):
+            np.testing.assert_allclose(got[f"{name}_r{i}"], k * np.asarray(v), atol=1e-9, rtol=0)
+
+
+@pytest.mark.parametrize("vectors, match", [(None, "no 'reflection_vectors'"), ([[1, -1]], "7 values of \\+1 or -1"),
+                                            ([[1, 1, 1, 1, 1, 1, 0.5]], "7 values")])
+def test_reflections_need_valid_sign_patterns(tmp_path, iiwa, vectors, match):
+    src = tmp_path / "ball"
+    write_set(src, np.random.default_rng(5), {"test": 1})
+    cfg = {"max_dis_between_knots": 0.32} | ({"reflection_vectors": vectors} if vectors else {})
+    (src / "spline_config.json").write_text(json.dumps(cfg))
+    with pytest.raises(DatasetError, match=match):
+        import_kiemel(src, tmp_path / "out", iiwa, reflections=True)
+    assert not (tmp_path / "out").exists()

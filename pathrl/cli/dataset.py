@@ -153,11 +153,15 @@ def cmd_import(argv: Sequence[str]) -> None:
     ap.add_argument("--kind", default=None, help="dataset kind to record (default: source dir name)")
     ap.add_argument("--degrees", action="store_true", help="csv/npy: the waypoints are in degrees (default radians)")
     ap.add_argument("--split", default="test", help="csv/npy: the split the paths go to (default test)")
+    ap.add_argument("--reflections", action="store_true",
+                    help="kiemel-json: store every path once per reflection vector of its spline_config.json")
     ap.add_argument("src_dir", help="kiemel-json: a directory; csv/npy: one path file or a directory of them")
     ap.add_argument("dest")
     args = ap.parse_args(list(argv))
     if args.format == "kiemel-json" and (args.degrees or args.split != "test"):
         raise UserError("pathrl-dataset import: --degrees and --split are for --format csv and npy")
+    if args.format != "kiemel-json" and args.reflections:
+        raise UserError("pathrl-dataset import: --reflections is for --format kiemel-json")
     if Path(args.dest).exists() and not args.overwrite:
         raise UserError(f"{args.dest}: already exists (pass --overwrite to replace it)")
     output_dir(args.dest, "DEST")
@@ -165,7 +169,8 @@ def cmd_import(argv: Sequence[str]) -> None:
     try:
         robot = load_robot_by_name(args.robot)
         if args.format == "kiemel-json":
-            ds = import_kiemel(args.src_dir, args.dest, robot, overwrite=args.overwrite, kind=args.kind)
+            ds = import_kiemel(args.src_dir, args.dest, robot, overwrite=args.overwrite, kind=args.kind,
+                               reflections=args.reflections)
         else:
             ds = import_waypoints(args.src_dir, args.dest, robot, args.format, args.degrees, args.split,
                                   args.overwrite, args.kind)

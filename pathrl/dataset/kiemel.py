@@ -27,7 +27,7 @@ from pathrl.dataset.io import MAX_KNOT_RAD, MAX_PATH_LENGTH_RAD, Dataset, Datase
 from pathrl.dataset.stats import dataset_stats
 from pathrl.robot.model import RobotSpec
 
-__all__ = ["MAX_KNOTS", "find_spline_config", "import_kiemel", "read_episode"]
+__all__ = ["MAX_KNOTS", "find_spline_config", "import_kiemel", "read_episode", "reflection_vectors"]
 
 SPLINE_CONFIG = "spline_config.json"
 
@@ -115,14 +115,32 @@ def find_spline_config(src: Path) -> tuple[Path | None, dict[str, Any]]:
     return None, {}
 
 
+def reflection_vectors(cfg: dict[str, Any], path_dof: int, where: Path) -> np.ndarray:
+    """(R, M) joint sign patterns of a ``spline_config.json``'s ``reflection_vectors``; DatasetError if it has none or
+    they are not +-1 vectors of the path's M joints (`where` names the file in the message)."""
+    vectors = cfg.get("reflection_vectors")
+    if not vectors:
+        raise DatasetError(f"{where}: no 'reflection_vectors' in spline_config.json (--reflections needs them)")
+    try:
+        v = np.asarray(vectors, dtype=np.float64)
+    except (TypeError, ValueError):
+        v = np.zeros(0)
+    if v.ndim != 2 or v.shape[1] != path_dof or not np.all(np.abs(v) == 1.0):
+        raise DatasetError(f"{where}: 'reflection_vectors' must be lists of {path_dof} values of +1 or -1")
+    return v
+
+
 def import_kiemel(
     src_dir: str | os.PathLike,
     dest: str | os.PathLike,
     robot: RobotSpec,
     overwrite: bool = False,
     kind: str | None = None,
+    reflections: bool = False,
 ) -> Dataset:
-    """Convert an authors'-format dataset directory into a pathrl dataset at `dest` (atomic)."""
+    """Convert an authors'-format dataset directory into a pathrl dataset at `dest` (atomic). With `reflections`,
+    every path is stored once per ``reflection_vectors`` entry of the set's ``spline_config.json`` (the joint sign
+    patterns their ball evaluation drew from), as ``<name>_r<i>``."""
     src = Path(src_dir)
     if not src.is_dir():
         raise DatasetError(f"{src}: source directory not found")
@@ -136,6 +154,9 @@ def import_kiemel(
     if not any(splits.values()):
         raise DatasetError(f"{src}: no episode_*.json files found (looked in {', '.join(map(str, layout.values()))})")
     cfg_path, cfg = find_spline_config(src)
+    if reflections:
+        signs = reflection_vectors(cfg, robot.path_dof, cfg_path or src)
+        splits = {s: [(f"{n}_r{i}", k * v) for n, k in p for i, v in enumerate(signs)] for s, p in splits.items()}
     stats = {s: {"stored": dataset_stats([k for _, k in p])} for s, p in splits.items()}
     meta = {
         "robot": robot.name,
@@ -148,5 +169,6 @@ def import_kiemel(
         "reference_max_knot_gap": cfg.get("max_dis_between_knots"),
         "spline_config": cfg,
         "spline_config_path": str(cfg_path) if cfg_path else None,
+        "reflections": bool(reflections),
     }
     return save_dataset(dest, splits, meta, overwrite=overwrite, stats=stats)
