@@ -208,15 +208,15 @@ def test_ball_sweep_paths_sweep_the_base_and_keep_the_plate_horizontal(tmp_path,
 
 
 def test_ball_region_params_are_checked():
-    from pathrl.datagen.generators.ball_balancing import start_box, step_weights
+    from pathrl.datagen.generators.ball_balancing import region_box, step_weights
 
     lim = load_robot_by_name("iiwa7").pos_limits
-    np.testing.assert_allclose(start_box(lim, None), lim[[0, 1, 3]])
-    np.testing.assert_allclose(start_box(lim, [[-9, 0], [0, 1], [1, 9]])[[0, 2]], [[lim[0, 0], 0], [1, lim[3, 1]]])
+    np.testing.assert_allclose(region_box(lim, None), lim[[0, 1, 3]])
+    np.testing.assert_allclose(region_box(lim, [[-9, 0], [0, 1], [1, 9]])[[0, 2]], [[lim[0, 0], 0], [1, lim[3, 1]]])
     with pytest.raises(DatasetError, match="start_region: expected three"):
-        start_box(lim, [[0, 1]])
+        region_box(lim, [[0, 1]])
     with pytest.raises(DatasetError, match="region: .* outside the position limits"):
-        start_box(lim, [[5, 6], [0, 1], [0, 1]], "region")
+        region_box(lim, [[5, 6], [0, 1], [0, 1]], "region")
     np.testing.assert_allclose(step_weights(None), np.ones(3))
     with pytest.raises(DatasetError, match="step_weights"):
         step_weights([1.0, 0.0, 1.0])

@@ -2,9 +2,10 @@
 their four joint sign patterns (reflection vectors), 4 x 200 whole paths.
 
 Their paths are not in this repository: pass a checkout of their code (``--checkout``). The script imports
-``tracking/dataset/industrial/ball_balancing`` (``pathrl.dataset.kiemel.import_kiemel``), writes one dataset per
-reflection under ``--work``, runs ``pathrl-eval`` on each for every run directory and prints the four results and
-their mean (end of path, mean Cartesian deviation, balls lost, limit violations).
+``tracking/dataset/industrial/ball_balancing`` with its reflections (``pathrl-dataset import --format kiemel-json
+--reflections`` does the same in one dataset), writes one dataset per reflection under ``--work``, runs
+``pathrl-eval`` on each for every run directory and prints the four results and their mean (end of path, mean
+Cartesian deviation, balls lost, limit violations).
 
 Usage:
     .venv/bin/python tools/lab/authors_ball_set.py --checkout <pathTracking> \\
@@ -23,9 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
-from pathrl.datagen.generators.ball_balancing import REFLECTIONS
 from pathrl.dataset.io import load_dataset, save_dataset
-from pathrl.dataset.kiemel import import_kiemel
+from pathrl.dataset.kiemel import import_kiemel, reflection_vectors
 from pathrl.robot.external import load_robot_by_name
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -34,16 +34,18 @@ COLUMNS = ("duration_end_of_path_s", "cart_pos_dev_mean_cm", "ball_fell_pct", "l
 
 
 def reflected_sets(checkout: Path, work: Path) -> list[Path]:
-    """Import the authors' ball test set from `checkout` and write it once per reflection; the dataset dirs."""
-    base = import_kiemel(checkout / SOURCE, work / "authors_ball", load_robot_by_name("iiwa7"), overwrite=True)
+    """Import the authors' ball test set from `checkout` with its reflections (``import_kiemel(reflections=True)``:
+    the sign patterns of their ``spline_config.json``, paths named ``<name>_r<i>``) and write one dataset per
+    reflection; the dataset dirs."""
+    iiwa = load_robot_by_name("iiwa7")
+    base = import_kiemel(checkout / SOURCE, work / "authors_ball", iiwa, overwrite=True, reflections=True)
     meta = {k: v for k, v in base.meta.items() if k not in ("format", "splits", "content_hash", "created", "stats")}
     test = load_dataset(work / "authors_ball").splits["test"]
+    paths = list(zip(test.names, test.knots, strict=True))
     out = []
-    for i, sign in enumerate(REFLECTIONS):
+    for i in range(len(reflection_vectors(base.meta["spline_config"], iiwa.path_dof, checkout / SOURCE))):
         dest = work / f"authors_ball_reflection{i}"
-        save_dataset(
-            dest, {"test": [(n, k * sign) for n, k in zip(test.names, test.knots, strict=True)]}, meta, overwrite=True
-        )
+        save_dataset(dest, {"test": [(n, k) for n, k in paths if n.endswith(f"_r{i}")]}, meta, overwrite=True)
         out.append(dest)
     return out
 

@@ -22,7 +22,7 @@ __all__ = [
     "ball_paths",
     "check_ball_robot",
     "check_robot",
-    "start_box",
+    "region_box",
     "step_weights",
     "stored_paths",
 ]
@@ -71,7 +71,7 @@ def check_ball_robot(spec: RobotSpec) -> None:
         )
 
 
-def start_box(
+def region_box(
     pos_limits: np.ndarray, region: Sequence[Sequence[float]] | None, key: str = "start_region"
 ) -> np.ndarray:
     """(3, 2) [lo, hi] rad of (q1, q2, q4): `region` (three [lo, hi] pairs, the dataset parameter `key`) clipped into
@@ -123,8 +123,8 @@ def _ball_waypoints(
     step_lo, step_hi = (float(x) for x in p["waypoint_step"])
     q7_max = float(p["q7_max"])
     turn = float(p["waypoint_turn"])
-    box = start_box(ctx.spec.pos_limits, p.get("start_region"), "start_region")
-    region = None if p.get("region") is None else start_box(ctx.spec.pos_limits, p["region"], "region")
+    box = region_box(ctx.spec.pos_limits, p.get("start_region"), "start_region")
+    region = None if p.get("region") is None else region_box(ctx.spec.pos_limits, p["region"], "region")
     weights = step_weights(p.get("step_weights"))
     sweep = bool(p.get("sweep", False))
     # start: uniform in the start box of (q1, q2, q4) with q6 = q4 - q2 in limits, plate in the workspace, collision
