@@ -24,10 +24,12 @@ NAMES = {"Episode_Termination/task_failed": "ball_lost", "Episode_Termination/de
          "Metrics/success": "success"}
 
 
-def window(rows: list[dict[str, str]], first: int, last: int) -> dict[str, float | int]:
+def window(rows: list[dict[str, str]], first: int, last: int) -> dict[str, float | int] | None:
     """Means over iterations first..last (inclusive) of the curve's termination shares, duration (s) and success
-    (where logged), named by NAMES."""
+    (where logged), named by NAMES; None when the run logged none of those iterations."""
     sel = [r for r in rows if first <= int(r["iteration"]) <= last]
+    if not sel:
+        return None
     cols = [c for c in rows[0] if c.startswith("Episode_Termination/") or c in NAMES]
     mean = {NAMES.get(c, c.split("/")[-1]): sum(float(r[c] or 0.0) for r in sel) / len(sel) for c in cols}
     return {"first": first, "last": last, **mean}
@@ -39,7 +41,7 @@ def summary(rows: list[dict[str, str]], what: str, paper_steps: float) -> dict:
     n = int(last["iteration"]) + 1
     return {"what": what, "iterations": n, "env_steps": int(float(last["env_steps"])),
             "wall_time_s": float(last["wall_time_s"]), "paper_env_steps": paper_steps,
-            "last_100_iterations": window(rows, n - 100, n - 1), "iterations_300_399": window(rows, 300, 399)}
+            "last_100_iterations": window(rows, max(n - 100, 0), n - 1), "iterations_300_399": window(rows, 300, 399)}
 
 
 def main(argv: list[str] | None = None) -> int:
