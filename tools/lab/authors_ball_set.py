@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from pathrl.dataset.io import load_dataset, save_dataset
-from pathrl.dataset.kiemel import import_kiemel, reflection_vectors
+from pathrl.dataset.kiemel import import_kiemel
 from pathrl.robot.external import load_robot_by_name
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -37,15 +37,17 @@ def reflected_sets(checkout: Path, work: Path) -> list[Path]:
     """Import the authors' ball test set from `checkout` with its reflections (``import_kiemel(reflections=True)``:
     the sign patterns of their ``spline_config.json``, paths named ``<name>_r<i>``) and write one dataset per
     reflection; the dataset dirs."""
-    iiwa = load_robot_by_name("iiwa7")
-    base = import_kiemel(checkout / SOURCE, work / "authors_ball", iiwa, overwrite=True, reflections=True)
+    base = import_kiemel(checkout / SOURCE, work / "authors_ball", load_robot_by_name("iiwa7"), overwrite=True,
+                         reflections=True)
     meta = {k: v for k, v in base.meta.items() if k not in ("format", "splits", "content_hash", "created", "stats")}
     test = load_dataset(work / "authors_ball").splits["test"]
-    paths = list(zip(test.names, test.knots, strict=True))
+    by_reflection: dict[int, list] = {}
+    for name, knots in zip(test.names, test.knots, strict=True):
+        by_reflection.setdefault(int(name.rsplit("_r", 1)[1]), []).append((name, knots))
     out = []
-    for i in range(len(reflection_vectors(base.meta["spline_config"], iiwa.path_dof, checkout / SOURCE))):
+    for i in sorted(by_reflection):
         dest = work / f"authors_ball_reflection{i}"
-        save_dataset(dest, {"test": [(n, k) for n, k in paths if n.endswith(f"_r{i}")]}, meta, overwrite=True)
+        save_dataset(dest, {"test": by_reflection[i]}, meta, overwrite=True)
         out.append(dest)
     return out
 
