@@ -250,7 +250,8 @@ RECEIPTS: list[Receipt] = [
       p("VIII", "controlled_legs/balancing_reward", "duration_end_of_path_s")),
     R(README, "drives all 30 joints with no law at run time", const(30, "ARMAR-4's joints with legs")),
     R(README, "0.5 % falls at 5.35 s on the same episodes in PyBullet, 2.0 % on\neach of two more episode plans",
-      t("VIII", "controlled_legs/learned_from_balance_law", "fell_pct"), t("VIII", "controlled_legs/learned_from_balance_law", "duration_end_of_path_s"),
+      t("VIII", "controlled_legs/learned_from_balance_law", "fell_pct"),
+      t("VIII", "controlled_legs/learned_from_balance_law", "duration_end_of_path_s"),
       rcp("armar4_legs_balance_distill_plan1", "task_failed_pct")),
     R(README, "(32.8 M steps,\n29 min on one thread;", summary("iiwa7_trueadapt_on_plate_ppo_scratch", "env_steps",
       1e-6),
@@ -273,7 +274,8 @@ RECEIPTS: list[Receipt] = [
     R(README, "without the current acceleration (0.1 %, paper 91.4 %)",
       t("TA", "on_plate/no_current_acceleration_scratch", "success_pct"),
       p("TA", "on_plate/no_current_acceleration", "success_pct")),
-    R(README, "(85 M steps of the paper's 220 M, 52 min) keeps\n100.0 % at 0.38 cm from its start (paper 98.6 % at 1.2 cm;",
+    R(README, "(85 M steps of the paper's 220 M, 52 min) keeps\n"
+              "100.0 % at 0.38 cm from its start (paper 98.6 % at 1.2 cm;",
       summary("iiwa7_trueadapt_in_place_ppo_scratch", "env_steps", 1e-6),
       const(220, "the paper's in-place budget, M env steps (../shared/notes)"),
       summary("iiwa7_trueadapt_in_place_ppo_scratch", "wall_time_s", 1 / 60),
@@ -531,8 +533,10 @@ RECEIPTS += [
       rcp("armar4_target_point", "duration_s"), rcp("armar4_target_point", "cart_pos_dev_mean_cm"),
       ratio(rcp("armar4_target_point", "duration_s"), t("VI", "armar4_fixed/target_point", "toppra_duration_s")),
       p("I", "armar4_fixed/target_point", "duration_s"), p("I", "armar4_fixed/target_point", "cart_pos_dev_mean_cm")),
-    R(RES, "re-exploring at path-length weight 6", cfg("armar4_target_point_length6_explore", "reward.terms.path_length.weight")),
-    R(RES, "`_length6_low_noise2`, `armar4_target_point_length6`: 5.54 s at 3.67 cm, then\nthe path length weighted 8 for\n"
+    R(RES, "re-exploring at path-length weight 6",
+      cfg("armar4_target_point_length6_explore", "reward.terms.path_length.weight")),
+    R(RES, "`_length6_low_noise2`, `armar4_target_point_length6`: 5.54 s at 3.67 cm, then\n"
+           "the path length weighted 8 for\n"
            "`models/tracking/armar4_target_point_length8`): 5.48 s at 3.75 cm, 1.57x TOPP-RA",
       raw("armar4_target_point_length6", "duration_s"), raw("armar4_target_point_length6",
       "cart_pos_dev_mean_cm"),
@@ -579,13 +583,17 @@ RECEIPTS += [
       t("VIII", "controlled_legs/balance_fast", "reached_end_pct"), t("VIII", "controlled_legs/balance_fast",
       "cart_pos_dev_mean_cm")),
     R(RES, "One network for all 30 joints, with no law at run time", const(30, "ARMAR-4's joints with legs")),
-    R(RES, "trained\non the batched torch model of the standing robot (`task.backend=analytic`, `pathrl/sim/standing.py`; 1024 envs, 400\n"
+    R(RES, "trained\non the batched torch model of the standing robot (`task.backend=analytic`, "
+           "`pathrl/sim/standing.py`; 1024 envs, 400\n"
            "iterations, 6.6 M steps, 26 min on one thread)",
       summary("armar4_legs_balance_distill", "num_envs"), summary("armar4_legs_balance_distill", "iterations"),
       summary("armar4_legs_balance_distill", "env_steps", 1e-6), minutes("armar4_legs_balance_distill")),
-    R(RES, "**0.5 %** falls at **5.35 s** end-of-path\nduration (99 % reach the end), 3.7 cm, 0 limit violations on the "
+    R(RES, "**0.5 %** falls at **5.35 s** end-of-path\nduration (99 % reach the end), 3.7 cm, "
+           "0 limit violations on the "
            "table's plan (paper's learned legs: 0.8 % at 5.59 s)",
-      t("VIII", "controlled_legs/learned_from_balance_law", "fell_pct"), t("VIII", "controlled_legs/learned_from_balance_law", "duration_end_of_path_s"), t("VIII", "controlled_legs/learned_from_balance_law", "reached_end_pct"),
+      t("VIII", "controlled_legs/learned_from_balance_law", "fell_pct"),
+      t("VIII", "controlled_legs/learned_from_balance_law", "duration_end_of_path_s"),
+      t("VIII", "controlled_legs/learned_from_balance_law", "reached_end_pct"),
       t("VIII", "controlled_legs/learned_from_balance_law", "cart_pos_dev_mean_cm"),
       raw("armar4_legs_balance_distill_in_pybullet", "limit_violations"),
       p("VIII", "controlled_legs/balancing_reward", "fell_pct"),

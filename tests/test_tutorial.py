@@ -233,5 +233,6 @@ def test_the_tutorial_runs_as_written(tmp_path, monkeypatch, capsys):
                 _check_outcome(prog, args, _run_cli(prog, args, capsys), knots)
                 ran.append(f"{prog} {args[0]}" if prog in ("pathrl-robot", "pathrl-dataset") else prog)
     assert ran == ["robot file", "export PATHRL_ROBOT_PATH", "pathrl-robot check", "pathrl-robot list",
-                   "pathrl-dataset generate", "pathrl-dataset generate", "pathrl-dataset import", "pathrl-train", "pathrl-eval", "pathrl-toppra",
+                   "pathrl-dataset generate", "pathrl-dataset generate", "pathrl-dataset import", "pathrl-train",
+                   "pathrl-eval", "pathrl-toppra",
                    "python loop", "python examples/control_loop_rates.py", "pathrl-export", "pathrl-view"]

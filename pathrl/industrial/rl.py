@@ -7,8 +7,8 @@ weights from the ``priority_weight`` key; ``SoftUpdate`` for the target networks
 torch 2.13). The policy maps one waypoint's 313 features to its 3 actions; all waypoints of a profile are
 one batch. ``critic_action_gain`` scales the critic's action input: with 313 features of magnitude 1-10
 against 3 actions in [-1, 1] the default-initialised critic is linear in the action (measured on the calibrated
-model, docs/industrial.md), so it cannot represent an optimum inside the clip. Ablations zero feature groups (``ablate``: ``p_target``, ``q_fjac``, ``e``) and turn PER off
-(``per_alpha = 0``).
+model, docs/industrial.md), so it cannot represent an optimum inside the clip. Ablations zero feature groups
+(``ablate``: ``p_target``, ``q_fjac``, ``e``) and turn PER off (``per_alpha = 0``).
 """
 
 from __future__ import annotations

@@ -130,7 +130,8 @@ def train(run_dir: Path, params: RLParams, controller: ControllerParams, m: int 
         start = int(state["iteration"])
         rng.bit_generator.state = state["np_rng"]
     t0 = time.perf_counter()
-    log: dict[str, list[float]] = {k: [] for k in ("reward", "err", "loss_q", "loss_actor", "a1", "a2", "a3", "at_clip")}
+    keys = ("reward", "err", "loss_q", "loss_actor", "a1", "a2", "a3", "at_clip")
+    log: dict[str, list[float]] = {k: [] for k in keys}
     episodes, env, obs = 0, None, None
     with McapJsonWriter(run_dir / f"train_{start:06d}.mcap") as writer:
         writer.write(RUN_CONFIG, {"config": config or {}, "params": asdict(params), "resumed_from": start})

@@ -16,8 +16,8 @@ from dataclasses import dataclass
 from pathrl.config.paper import load as load_paper
 
 __all__ = [
-    "PAPER_RL", "PAPER_TABLE2", "PAPER_TABLE3", "PAPER_TABLE4", "Table2Row", "Table3Row", "ilc_summary", "per_row_ratio",
-    "ratios", "table2_markdown", "table3_markdown", "table4_markdown",
+    "PAPER_RL", "PAPER_TABLE2", "PAPER_TABLE3", "PAPER_TABLE4", "Table2Row", "Table3Row", "ilc_summary",
+    "per_row_ratio", "ratios", "table2_markdown", "table3_markdown", "table4_markdown",
 ]
 
 _PAPER = load_paper("industrial")

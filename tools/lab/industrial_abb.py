@@ -7,9 +7,9 @@
     .venv/bin/python tools/lab/industrial_abb.py table3 RUN_DIR [V_MAX_FACTOR]  # -> results/industrial_abb_table3.md
     .venv/bin/python tools/lab/industrial_abb.py critic RUN_DIR/model_K.pt  # the critic vs the one-step reward
 
-``table2`` runs MPGD, both ILC variants (``ILCColumns``: the gains as tuned by ``ilc``, 1 and 1) and the policy of RUN_DIR
-on the nine rows and reports executions per row, ratios as means of per-row ratios with totals beside, t_opt
-measured and under the paper's cost model, and the distribution of the policy's first actions a1-a3.
+``table2`` runs MPGD, both ILC variants (``ILCColumns``: the gains as tuned by ``ilc``, 1 and 1) and the policy of
+RUN_DIR on the nine rows and reports executions per row, ratios as means of per-row ratios with totals beside,
+t_opt measured and under the paper's cost model, and the distribution of the policy's first actions a1-a3.
 
 ``ilc`` tunes each ILC variant's gain on training-family curves (``rl_train.training_target``, seeds of the
 training draw, never the Table II rows), then runs baseline, P-type ILC, filtered ILC and the constant
@@ -325,7 +325,8 @@ def main() -> None:
         return
     name = {"calibrate": "calibration", "ilc": "ilc", "mpgd_gain": "mpgd_gain", "table2": "table2",
             "table3": "table3"}[what]
-    path = Path(sys.argv[3]) if what == "table2" and len(sys.argv) > 3 else ROOT / "results" / f"industrial_abb_{name}.md"
+    default = ROOT / "results" / f"industrial_abb_{name}.md"
+    path = Path(sys.argv[3]) if what == "table2" and len(sys.argv) > 3 else default
     atomic_write(path, text)
     print(text)
 
