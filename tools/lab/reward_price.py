@@ -71,7 +71,7 @@ class _Ledger:
         g = self._closer_gain(env) * torch.where(stopped, 1.0 + remaining, 1.0)
         gain += torch.where(live, g, 0.0)
         gain_disc += torch.where(live, g * GAMMA**t, 0.0)
-        ended |= env.last_step["stopped"].cpu() | env.last_step["time_outs"].cpu()
+        ended |= stopped | env.last_step["time_outs"].cpu()
 
     def flush(self) -> None:
         if self._open is not None:
@@ -98,7 +98,7 @@ def price(run: str, closer: float = 1.0) -> dict[str, float]:
         PathTrackingEnv.step = step  # type: ignore[method-assign]
     ledger.flush()
     rows = torch.tensor(ledger.rows[: len(records)], dtype=torch.float64)
-    ends = torch.tensor([r.finish_step * 0.1 for r in records if r.finish_step >= 0])
+    ends = torch.tensor([r.finish_step * float(r.extra["dt"]) for r in records if r.finish_step >= 0])
     return {"end_of_path_s": float(ends.mean()), "terms": float(rows[:, 0].mean()),
             "stop_bonus": float(rows[:, 1].mean()), "return": float(rows[:, :2].sum(1).mean()),
             "return_discounted": float(rows[:, 2].mean()), "closer_gain": float(rows[:, 3].mean()),
