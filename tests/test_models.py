@@ -1,12 +1,14 @@
 """MixedPrecisionMLPModel: the stock MLPModel's function and state dict, hidden layers in bfloat16."""
 
+import json
+
 import pytest
 import torch
 from rsl_rl.models import MLPModel
 from rsl_rl.modules import MLP
 from tensordict import TensorDict
 
-from pathrl.eval.curve import CurvePoint, Target, first_reaching
+from pathrl.eval.curve import CurvePoint, Target, _cached, curve_point, first_reaching
 from pathrl.policy.models import MixedPrecisionMLPModel
 
 DIST = {"class_name": "GaussianDistribution", "init_std": 0.2, "std_type": "scalar"}
@@ -68,3 +70,21 @@ def test_first_reaching_needs_both_limits_and_no_violation():
            CurvePoint(400, 4, 240.0, 4.0, 3.0, 0)]
     assert first_reaching(pts[::-1], target) == pts[2]
     assert first_reaching(pts[:2], target) is None
+
+
+def test_curve_point_reads_the_ball_columns_when_there():
+    tracking = {"duration_s": 2.5, "cart_pos_dev_mean_cm": 3.0, "limit_violations": 0, "duration_end_of_path_s": None}
+    ball = {**tracking, "duration_end_of_path_s": 2.25, "task_failed_pct": 1.5}
+    assert curve_point(3, 100, 12.0, tracking) == CurvePoint(3, 300, 12.0, 2.5, 3.0, 0, None, None)
+    assert curve_point(3, 100, None, ball) == CurvePoint(3, 300, None, 2.5, 3.0, 0, 2.25, 1.5)
+
+
+def test_cached_curve_evaluation_must_come_from_the_same_simulator(tmp_path):
+    path = tmp_path / "metrics.json"
+    metrics = {"dataset": "d", "segments": "full", "episodes": 200, "task": {"simulator": "analytic"}}
+    path.write_text(json.dumps(metrics))
+    assert _cached(path, "d", None, "full", "analytic") is not None
+    assert _cached(path, "d", None, "full", "pybullet") is None  # an analytic result never stands in for PyBullet
+    assert _cached(path, "d", 100, "full", "analytic") is None
+    path.write_text(json.dumps({"dataset": "d", "segments": "full", "episodes": 200}))  # tracking only: no simulator
+    assert _cached(path, "d", None, "full", "pybullet") is not None

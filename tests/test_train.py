@@ -103,6 +103,9 @@ def test_train_resume_and_eval(tiny_dataset, tmp_path):
     assert rec["segments"] == "full" and [p["iteration"] for p in rec["points"]] == [1, 4]
     full = [json.loads(f.read_text()) for f in (tmp_path / "curve_full").glob("*/model_*/metrics.json")]
     assert len(full) == 2 and all(m["segments"] == "full" and m["episodes"] == len(m["per_episode"]) for m in full)
+    rows = (tmp_path / "curve_full" / f"{str(run_dir).replace('/', '_')}.csv").read_text().splitlines()
+    assert rows[0].startswith("iteration,env_steps,wall_time_s,duration_s,cart_pos_dev_mean_cm,limit_violations,")
+    assert [r.split(",")[0] for r in rows[1:]] == ["1", "4"] and all(r.endswith(",") for r in rows[1:])  # no task
     r = run([sys.executable, "tools/lab/time_to_quality.py", "--run", str(run_dir), "--row", "iiwa7/nowhere",
              "--out", str(curve)])
     assert r.returncode == 2 and "not a Table I row" in r.stderr
@@ -150,7 +153,8 @@ def test_ball_task_warm_start_train_and_pybullet_eval(tiny_dataset, tmp_path):
     m = json.loads((out / "metrics.json").read_text())
     task_msgs = [msg for t, _, msg in read_messages(out / "episodes.mcap") if t == "/eval/task"]
     assert task_msgs and {"episode", "t", "ball_dist", "ball_on_plate"} <= set(task_msgs[0])
-    assert m["task"] == {"name": "ball_on_plate", "backend": "PyBulletBall", "observed": True, "open_loop": False}
+    assert m["task"] == {"name": "ball_on_plate", "backend": "PyBulletBall", "simulator": "pybullet", "observed": True,
+                         "open_loop": False}
     assert 0.0 <= m["task_failed_pct"] <= 100.0 and len(m["per_episode"]) == 2
     # the tracking run evaluated with the ball riding along unobserved
     r = run([str(BIN / "pathrl-eval"), f"run_dir={src}", "compile_limits=false",

@@ -15,8 +15,8 @@ from pathlib import Path
 from pathrl.config.paper import load as load_paper
 from pathrl.storage import atomic_write, checkpoint_iteration, load_checkpoint, run_checkpoints
 
-__all__ = ["CurvePoint", "PAPER_EPISODES", "Target", "checkpoint_wall_time", "checkpoints", "curve_record",
-           "evaluate_curve", "first_reaching", "plot_curves"]
+__all__ = ["CurvePoint", "PAPER_EPISODES", "Target", "checkpoint_wall_time", "checkpoints", "curve_point",
+           "curve_record", "evaluate_curve", "first_reaching", "plot_curves"]
 
 #: Test segments per evaluation with ``segments=paper``: the paper's protocol.
 PAPER_EPISODES = int(load_paper("tracking").value("episodes"))
@@ -32,6 +32,8 @@ class CurvePoint:
     duration_s: float  # mean episode duration (s)
     cart_pos_dev_mean_cm: float
     limit_violations: int
+    end_of_path_s: float | None = None  # mean time to the path end over the episodes that got there (s)
+    task_failed_pct: float | None = None  # feedback tasks: share of episodes whose task failed (ball lost, fall)
 
 
 @dataclass(frozen=True)
@@ -66,12 +68,15 @@ def checkpoint_wall_time(path: Path) -> float | None:
 
 def evaluate_curve(run_dir: Path, dataset: str, out_dir: Path, every: int = 50,
                    episodes: int | None = PAPER_EPISODES,
-                   progress: bool = True, segments: str = "paper") -> list[CurvePoint]:
+                   progress: bool = True, segments: str = "paper", backend: str = "pybullet",
+                   out_of_limits: str = "refuse") -> list[CurvePoint]:
     """Evaluate every selected checkpoint of `run_dir` on the test split of `dataset` (`segments`: the paper's
-    random segments, or ``full`` paths; `episodes` None: one per path with ``full``).
+    random segments, or ``full`` paths; `episodes` None: one per path with ``full``; `backend`: the simulator of
+    a feedback task, ``pybullet`` or ``analytic``; `out_of_limits`: ``refuse`` or ``clip`` paths that leave the
+    position limits, as :class:`pathrl.eval.evaluate.EvalOptions`).
 
     Each evaluation's metrics.json lands in ``out_dir/model_<k>/``; an existing one for the same dataset,
-    segments and episode count is reused, so an interrupted curve continues where it stopped.
+    segments, episode count and feedback backend is reused, so an interrupted curve continues where it stopped.
     """
     from pathrl.eval.evaluate import EvalOptions, evaluate
 
@@ -79,15 +84,23 @@ def evaluate_curve(run_dir: Path, dataset: str, out_dir: Path, every: int = 50,
     points = []
     for k, ckpt in checkpoints(run_dir, every):
         out = Path(out_dir) / ckpt.stem
-        m = _cached(out / "metrics.json", dataset, episodes, segments)
+        m = _cached(out / "metrics.json", dataset, episodes, segments, backend)
         if m is None:
             if progress:
                 print(f"evaluate {ckpt}")
             m = evaluate(run_dir, EvalOptions(dataset_path=dataset, episodes=episodes, segments=segments,
-                                              out_dir=out, record=False, progress=False, checkpoint=ckpt.name))
-        points.append(CurvePoint(k + 1, (k + 1) * steps_per_it, checkpoint_wall_time(ckpt), float(m["duration_s"]),
-                                 float(m["cart_pos_dev_mean_cm"]), int(m["limit_violations"])))
+                                              out_dir=out, record=False, progress=False, checkpoint=ckpt.name,
+                                              backend=backend, out_of_limits=out_of_limits))
+        points.append(curve_point(k + 1, steps_per_it, checkpoint_wall_time(ckpt), m))
     return points
+
+
+def curve_point(iteration: int, steps_per_iteration: int, wall_time_s: float | None, metrics: dict) -> CurvePoint:
+    """The curve point of one checkpoint from its evaluation's `metrics` (``metrics.json``)."""
+    end, failed = metrics.get("duration_end_of_path_s"), metrics.get("task_failed_pct")
+    return CurvePoint(iteration, iteration * steps_per_iteration, wall_time_s, float(metrics["duration_s"]),
+                      float(metrics["cart_pos_dev_mean_cm"]), int(metrics["limit_violations"]),
+                      None if end is None else float(end), None if failed is None else float(failed))
 
 
 def first_reaching(points: list[CurvePoint], target: Target) -> CurvePoint | None:
@@ -146,9 +159,11 @@ def _steps_per_iteration(run_dir: Path) -> int:
     return int(cfg["agent"]["num_steps_per_env"]) * int(cfg["env"]["num_envs"])
 
 
-def _cached(path: Path, dataset: str, episodes: int | None, segments: str) -> dict | None:
+def _cached(path: Path, dataset: str, episodes: int | None, segments: str, backend: str) -> dict | None:
     if not path.is_file():
         return None
     m = json.loads(path.read_text())
     same = m.get("dataset") == str(dataset) and m.get("segments", "paper") == segments
+    task = m.get("task")  # a feedback task's metrics name the simulator that produced them
+    same = same and (task is None or task.get("simulator") == backend)
     return m if same and (episodes is None or m.get("episodes") == episodes) else None

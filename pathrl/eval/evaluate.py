@@ -241,7 +241,7 @@ def _finish(records: list[EpisodeRecord], rollout_s: float, src: EvalSource, opt
     if src.task_run_cfg is not None:
         t = task_cfg(src.task_run_cfg)
         backend = type(getattr(env.feedback, "inner", env.feedback)).__name__
-        metrics["task"] = {"name": t["name"], "backend": backend, "observed": t["observe"],
+        metrics["task"] = {"name": t["name"], "backend": backend, "simulator": opts.backend, "observed": t["observe"],
                            "open_loop": opts.open_loop}
         metrics["task_failed_pct"] = 100.0 * float(np.mean([p["task_failed"] for p in per_episode]))
         metrics[FAILURE_METRIC[t["feedback"]]] = metrics["task_failed_pct"]

@@ -9,21 +9,40 @@ Each run's checkpoints (every ``--every`` iterations and the last) are evaluated
 (duration and mean Cartesian deviation against training wall time). The target is a Table I row of
 ``pathrl/config/paper/tracking.yaml``: duration <= the paper's, mean Cartesian deviation <= ``--dev-factor`` x the
 paper's, no limit violation. Evaluations are cached per checkpoint under ``--out``: a rerun only adds new ones.
+
+A feedback run (ball on a plate, standing) is evaluated in PyBullet by default; ``--backend analytic`` uses the
+batched model it trained on (seconds per checkpoint). Each run's points are also written to ``<out>/<label>.csv``
+(iteration, env steps, wall time, duration, time to the path end, deviation, violations, task failures):
+
+    python tools/lab/time_to_quality.py --run runs/iiwa7_ball_balancing_reward_scratch_fixed_lr/seed0 \
+        --dataset datasets/iiwa7/ball_balancing --segments full --backend analytic --out-of-limits clip --every 10 \
+        --out results/ball_balancing_from_scratch/fixed_lr
 """
 
 from __future__ import annotations
 
 import argparse
+import csv
+import io
 import os
 import sys
+from dataclasses import asdict, fields
 from pathlib import Path
 
 import yaml
 
 from pathrl.config.paper import load as load_paper
-from pathrl.eval.curve import PAPER_EPISODES, Target, curve_record, evaluate_curve, first_reaching, plot_curves
+from pathrl.eval.curve import (
+    PAPER_EPISODES,
+    CurvePoint,
+    Target,
+    curve_record,
+    evaluate_curve,
+    first_reaching,
+    plot_curves,
+)
 from pathrl.repro.tables import PATH_ROBOT, TABLE_I
-from pathrl.storage import write_json_atomic
+from pathrl.storage import atomic_write, write_json_atomic
 
 
 def paper_target(row: str, dev_factor: float) -> Target:
@@ -42,6 +61,16 @@ def default_dataset(run: Path) -> str:
     return f"datasets/{PATH_ROBOT.get(robot, robot)}/{cfg['dataset']['name']}"
 
 
+def points_csv(points: list[CurvePoint]) -> str:
+    """The curve's points as CSV text, one row per checkpoint (empty cells for values a run does not have)."""
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=[f.name for f in fields(CurvePoint)], lineterminator="\n")
+    w.writeheader()
+    for p in points:
+        w.writerow({k: "" if v is None else v for k, v in asdict(p).items()})
+    return buf.getvalue()
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--run", action="append", required=True, type=Path, help="run directory (repeat to compare)")
@@ -54,7 +83,12 @@ def main(argv: list[str] | None = None) -> int:
                     "--segments full)")
     ap.add_argument("--segments", choices=("paper", "full"), default="paper",
                     help="the paper's random segments (default) or whole paths (the ball-balancing row)")
-    ap.add_argument("--out", type=Path, required=True, help="output directory (curve.json, curve.png, cache)")
+    ap.add_argument("--backend", choices=("pybullet", "analytic"), default="pybullet",
+                    help="simulator of a feedback task (default pybullet; analytic: the batched training model)")
+    ap.add_argument("--out-of-limits", choices=("refuse", "clip"), default="refuse",
+                    help="paths of the dataset that leave the position limits: refuse (default) or clip")
+    ap.add_argument("--out", type=Path, required=True,
+                    help="output directory (curve.json, curve.png, <label>.csv, cache)")
     args = ap.parse_args(argv)
     labels = args.label or [str(r) for r in args.run]
     if len(labels) != len(args.run):
@@ -68,15 +102,18 @@ def main(argv: list[str] | None = None) -> int:
             dataset = args.dataset or default_dataset(run)
             episodes = args.episodes or (PAPER_EPISODES if args.segments == "paper" else None)
             pts = evaluate_curve(run, dataset, args.out / label.replace("/", "_"), args.every, episodes,
-                                 segments=args.segments)
+                                 segments=args.segments, backend=args.backend, out_of_limits=args.out_of_limits)
             curves[label] = pts
             records.append(curve_record(pts, target, {"label": label, "run": str(run), "dataset": dataset,
-                                                      "segments": args.segments, "episodes": episodes}))
+                                                      "segments": args.segments, "episodes": episodes,
+                                                      "backend": args.backend}))
     except (ValueError, OSError) as exc:
         print(f"error: {str(exc).splitlines()[0]}", file=sys.stderr)
         return 2
     args.out.mkdir(parents=True, exist_ok=True)
     write_json_atomic(args.out / "curve.json", {"row": args.row, "runs": records})
+    for label, pts in curves.items():
+        atomic_write(args.out / f"{label.replace('/', '_')}.csv", points_csv(pts))
     plot_curves(curves, target, args.out / "curve.png", title=args.row or "")
     for rec, (label, pts) in zip(records, curves.items(), strict=True):
         hit = first_reaching(pts, target) if target else None
