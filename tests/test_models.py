@@ -8,7 +8,7 @@ from rsl_rl.models import MLPModel
 from rsl_rl.modules import MLP
 from tensordict import TensorDict
 
-from pathrl.eval.curve import CurvePoint, Target, _cached, curve_point, first_reaching
+from pathrl.eval.curve import CurvePoint, CurveProtocol, Target, _cached, curve_point, first_reaching
 from pathrl.policy.models import MixedPrecisionMLPModel
 
 DIST = {"class_name": "GaussianDistribution", "init_std": 0.2, "std_type": "scalar"}
@@ -83,8 +83,8 @@ def test_cached_curve_evaluation_must_come_from_the_same_simulator(tmp_path):
     path = tmp_path / "metrics.json"
     metrics = {"dataset": "d", "segments": "full", "episodes": 200, "task": {"simulator": "analytic"}}
     path.write_text(json.dumps(metrics))
-    assert _cached(path, "d", None, "full", "analytic") is not None
-    assert _cached(path, "d", None, "full", "pybullet") is None  # an analytic result never stands in for PyBullet
-    assert _cached(path, "d", 100, "full", "analytic") is None
+    assert _cached(path, "d", CurveProtocol(None, "full", "analytic")) is not None
+    assert _cached(path, "d", CurveProtocol(None, "full", "pybullet")) is None  # analytic never stands in for PyBullet
+    assert _cached(path, "d", CurveProtocol(100, "full", "analytic")) is None
     path.write_text(json.dumps({"dataset": "d", "segments": "full", "episodes": 200}))  # tracking only: no simulator
-    assert _cached(path, "d", None, "full", "pybullet") is not None
+    assert _cached(path, "d", CurveProtocol(None, "full", "pybullet")) is not None

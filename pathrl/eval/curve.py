@@ -15,8 +15,8 @@ from pathlib import Path
 from pathrl.config.paper import load as load_paper
 from pathrl.storage import atomic_write, checkpoint_iteration, load_checkpoint, run_checkpoints
 
-__all__ = ["CurvePoint", "PAPER_EPISODES", "Target", "checkpoint_wall_time", "checkpoints", "curve_point",
-           "curve_record", "evaluate_curve", "first_reaching", "plot_curves"]
+__all__ = ["CurvePoint", "CurveProtocol", "PAPER_EPISODES", "Target", "checkpoint_wall_time", "checkpoints",
+           "curve_point", "curve_record", "evaluate_curve", "first_reaching", "plot_curves"]
 
 #: Test segments per evaluation with ``segments=paper``: the paper's protocol.
 PAPER_EPISODES = int(load_paper("tracking").value("episodes"))
@@ -66,31 +66,40 @@ def checkpoint_wall_time(path: Path) -> float | None:
     return None if t is None else float(t)
 
 
+@dataclass(frozen=True)
+class CurveProtocol:
+    """How each checkpoint of a curve is evaluated: `episodes` (None: one per path with ``full``), `segments` (the
+    paper's random segments or ``full`` paths), `backend` (the simulator of a feedback task, ``pybullet`` or
+    ``analytic``) and `out_of_limits` (``refuse`` or ``clip`` paths that leave the position limits), as in
+    :class:`pathrl.eval.evaluate.EvalOptions`."""
+
+    episodes: int | None = PAPER_EPISODES
+    segments: str = "paper"
+    backend: str = "pybullet"
+    out_of_limits: str = "refuse"
+
+
 def evaluate_curve(run_dir: Path, dataset: str, out_dir: Path, every: int = 50,
-                   episodes: int | None = PAPER_EPISODES,
-                   progress: bool = True, segments: str = "paper", backend: str = "pybullet",
-                   out_of_limits: str = "refuse") -> list[CurvePoint]:
-    """Evaluate every selected checkpoint of `run_dir` on the test split of `dataset` (`segments`: the paper's
-    random segments, or ``full`` paths; `episodes` None: one per path with ``full``; `backend`: the simulator of
-    a feedback task, ``pybullet`` or ``analytic``; `out_of_limits`: ``refuse`` or ``clip`` paths that leave the
-    position limits, as :class:`pathrl.eval.evaluate.EvalOptions`).
+                   protocol: CurveProtocol = CurveProtocol(), progress: bool = True) -> list[CurvePoint]:
+    """Evaluate every selected checkpoint of `run_dir` on the test split of `dataset` as `protocol` says.
 
     Each evaluation's metrics.json lands in ``out_dir/model_<k>/``; an existing one for the same dataset,
-    segments, episode count and feedback backend is reused, so an interrupted curve continues where it stopped.
+    segments, episode count and feedback simulator is reused, so an interrupted curve continues where it stopped.
     """
     from pathrl.eval.evaluate import EvalOptions, evaluate
 
+    pr = protocol
     steps_per_it = _steps_per_iteration(run_dir)
     points = []
     for k, ckpt in checkpoints(run_dir, every):
         out = Path(out_dir) / ckpt.stem
-        m = _cached(out / "metrics.json", dataset, episodes, segments, backend)
+        m = _cached(out / "metrics.json", dataset, pr)
         if m is None:
             if progress:
                 print(f"evaluate {ckpt}")
-            m = evaluate(run_dir, EvalOptions(dataset_path=dataset, episodes=episodes, segments=segments,
+            m = evaluate(run_dir, EvalOptions(dataset_path=dataset, episodes=pr.episodes, segments=pr.segments,
                                               out_dir=out, record=False, progress=False, checkpoint=ckpt.name,
-                                              backend=backend, out_of_limits=out_of_limits))
+                                              backend=pr.backend, out_of_limits=pr.out_of_limits))
         points.append(curve_point(k + 1, steps_per_it, checkpoint_wall_time(ckpt), m))
     return points
 
@@ -159,11 +168,11 @@ def _steps_per_iteration(run_dir: Path) -> int:
     return int(cfg["agent"]["num_steps_per_env"]) * int(cfg["env"]["num_envs"])
 
 
-def _cached(path: Path, dataset: str, episodes: int | None, segments: str, backend: str) -> dict | None:
+def _cached(path: Path, dataset: str, protocol: CurveProtocol) -> dict | None:
     if not path.is_file():
         return None
     m = json.loads(path.read_text())
-    same = m.get("dataset") == str(dataset) and m.get("segments", "paper") == segments
+    same = m.get("dataset") == str(dataset) and m.get("segments", "paper") == protocol.segments
     task = m.get("task")  # a feedback task's metrics name the simulator that produced them
-    same = same and (task is None or task.get("simulator") == backend)
-    return m if same and (episodes is None or m.get("episodes") == episodes) else None
+    same = same and (task is None or task.get("simulator") == protocol.backend)
+    return m if same and (protocol.episodes is None or m.get("episodes") == protocol.episodes) else None

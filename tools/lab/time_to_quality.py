@@ -35,6 +35,7 @@ from pathrl.config.paper import load as load_paper
 from pathrl.eval.curve import (
     PAPER_EPISODES,
     CurvePoint,
+    CurveProtocol,
     Target,
     curve_record,
     evaluate_curve,
@@ -101,8 +102,8 @@ def main(argv: list[str] | None = None) -> int:
                 raise ValueError(f"--run: {run} is not a run directory (no config.yaml)")
             dataset = args.dataset or default_dataset(run)
             episodes = args.episodes or (PAPER_EPISODES if args.segments == "paper" else None)
-            pts = evaluate_curve(run, dataset, args.out / label.replace("/", "_"), args.every, episodes,
-                                 segments=args.segments, backend=args.backend, out_of_limits=args.out_of_limits)
+            protocol = CurveProtocol(episodes, args.segments, args.backend, args.out_of_limits)
+            pts = evaluate_curve(run, dataset, args.out / label.replace("/", "_"), args.every, protocol)
             curves[label] = pts
             records.append(curve_record(pts, target, {"label": label, "run": str(run), "dataset": dataset,
                                                       "segments": args.segments, "episodes": episodes,
