@@ -88,18 +88,18 @@ def evaluate_curve(run_dir: Path, dataset: str, out_dir: Path, every: int = 50,
     """
     from pathrl.eval.evaluate import EvalOptions, evaluate
 
-    pr = protocol
     steps_per_it = _steps_per_iteration(run_dir)
     points = []
     for k, ckpt in checkpoints(run_dir, every):
         out = Path(out_dir) / ckpt.stem
-        m = _cached(out / "metrics.json", dataset, pr)
+        m = _cached(out / "metrics.json", dataset, protocol)
         if m is None:
             if progress:
                 print(f"evaluate {ckpt}")
-            m = evaluate(run_dir, EvalOptions(dataset_path=dataset, episodes=pr.episodes, segments=pr.segments,
-                                              out_dir=out, record=False, progress=False, checkpoint=ckpt.name,
-                                              backend=pr.backend, out_of_limits=pr.out_of_limits))
+            m = evaluate(run_dir, EvalOptions(dataset_path=dataset, episodes=protocol.episodes,
+                                              segments=protocol.segments, out_dir=out, record=False, progress=False,
+                                              checkpoint=ckpt.name, backend=protocol.backend,
+                                              out_of_limits=protocol.out_of_limits))
         points.append(curve_point(k + 1, steps_per_it, checkpoint_wall_time(ckpt), m))
     return points
 

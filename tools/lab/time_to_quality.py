@@ -22,11 +22,9 @@ batched model it trained on (seconds per checkpoint). Each run's points are also
 from __future__ import annotations
 
 import argparse
-import csv
-import io
 import os
 import sys
-from dataclasses import asdict, fields
+from dataclasses import asdict
 from pathlib import Path
 
 import yaml
@@ -34,7 +32,6 @@ import yaml
 from pathrl.config.paper import load as load_paper
 from pathrl.eval.curve import (
     PAPER_EPISODES,
-    CurvePoint,
     CurveProtocol,
     Target,
     curve_record,
@@ -44,6 +41,7 @@ from pathrl.eval.curve import (
 )
 from pathrl.repro.tables import PATH_ROBOT, TABLE_I
 from pathrl.storage import atomic_write, write_json_atomic
+from pathrl.train.ship import curve_csv
 
 
 def paper_target(row: str, dev_factor: float) -> Target:
@@ -60,16 +58,6 @@ def default_dataset(run: Path) -> str:
     cfg = yaml.safe_load((run / "config.yaml").read_text())
     robot = cfg["robot"]["name"]
     return f"datasets/{PATH_ROBOT.get(robot, robot)}/{cfg['dataset']['name']}"
-
-
-def points_csv(points: list[CurvePoint]) -> str:
-    """The curve's points as CSV text, one row per checkpoint (empty cells for values a run does not have)."""
-    buf = io.StringIO()
-    w = csv.DictWriter(buf, fieldnames=[f.name for f in fields(CurvePoint)], lineterminator="\n")
-    w.writeheader()
-    for p in points:
-        w.writerow({k: "" if v is None else v for k, v in asdict(p).items()})
-    return buf.getvalue()
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -114,7 +102,7 @@ def main(argv: list[str] | None = None) -> int:
     args.out.mkdir(parents=True, exist_ok=True)
     write_json_atomic(args.out / "curve.json", {"row": args.row, "runs": records})
     for label, pts in curves.items():
-        atomic_write(args.out / f"{label.replace('/', '_')}.csv", points_csv(pts))
+        atomic_write(args.out / f"{label.replace('/', '_')}.csv", curve_csv([asdict(p) for p in pts]))
     plot_curves(curves, target, args.out / "curve.png", title=args.row or "")
     for rec, (label, pts) in zip(records, curves.items(), strict=True):
         hit = first_reaching(pts, target) if target else None
